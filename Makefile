@@ -1,0 +1,38 @@
+# swarmloc: two entry points (see README).
+#   make demo   set everything up, evaluate the shipped methods, show the leaderboard
+#   make test   set everything up and run the test suite
+PY      ?= python3
+VENV    ?= .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+
+.PHONY: setup test demo bench clean docs
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+# torch comes first and pinned: on these machines 2.13.0 is a local CPU wheel, while an
+# open range would pull several GB of CUDA wheels.
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+
+demo: $(STAMP)
+	$(BIN)/swarmloc demo
+
+bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
+	$(BIN)/python -m swarmloc.bench.speed
+
+docs: $(STAMP)
+	$(BIN)/python -m swarmloc.envs.docgen docs/tasks
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,1 @@
+"""swarmloc.bench."""
