@@ -1,0 +1,153 @@
+"""The results file: schema, atomic write, clear errors on bad files."""
+
+from __future__ import annotations
+
+import json
+import os
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pytest
+
+from swarmloc.bench import results as R
+
+
+def _results(n_seeds: int = 3) -> R.Results:
+    episodes = [
+        {
+            "task": task,
+            "seed": seed,
+            "metrics": R.EpisodeMetrics.of(
+                rmse=0.1 * (seed + 1), mean_error=0.05, max_error=1.0, diverged=False,
+                delay_ms=1.5, energy_j=0.2, jitter=0.01, team_return=123.0,
+                normalized_score=0.25 * seed,
+            ),
+        }
+        for task in ("swarmloc/Ideal-v0", "swarmloc/NLOS-v0")
+        for seed in range(n_seeds)
+    ]
+    keys = [(e["task"], e["seed"]) for e in episodes]
+    return R.make_results(
+        method=R.MethodInfo(name="uniform", entry_point="pkg.mod:make", privileged=False,
+                            track="A", deterministic=True),
+        suite=R.SuiteInfo(name="tiny", version="1", sha256=R.suite_sha256(keys)),
+        episodes=episodes,
+    )
+
+
+def test_results_file_round_trips(tmp_path: Path) -> None:
+    res = _results()
+    path = R.write_results(tmp_path / "r.json", res)
+    back = R.load_results(path)
+    assert back == res
+    raw = json.loads(path.read_text())
+    assert list(raw) == ["schema_version", "method", "suite", "provenance", "episodes", "aggregates"]
+    assert list(raw["episodes"][0]) == ["task", "seed", "metrics"]
+    assert list(raw["episodes"][0]["metrics"]) == list(R.METRIC_NAMES)
+    assert raw["episodes"][0]["metrics"]["fault_rmse"] is None
+    assert list(raw["aggregates"]["swarmloc/Ideal-v0"]["rmse"]) == list(R.AGGREGATE_FIELDS)
+    assert raw["aggregates"]["swarmloc/Ideal-v0"]["cep90"] is None
+    assert list(raw["provenance"]) == ["package_version", "git_commit", "created_utc",
+                                       "python_version", "numpy_version", "torch_version", "machine"]
+    assert raw["method"]["track"] == "A"
+    # No temporary files are left behind.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
+
+
+def test_write_is_atomic_on_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = R.write_results(tmp_path / "r.json", _results())
+    before = path.read_bytes()
+
+    def boom(src: str, dst: str) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError, match="disk full"):
+        R.write_results(path, _results(n_seeds=4))
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
+
+
+def test_truncated_file_is_rejected_clearly(tmp_path: Path) -> None:
+    path = R.write_results(tmp_path / "r.json", _results())
+    text = path.read_text()
+    path.write_text(text[: len(text) // 2])
+    with pytest.raises(R.ResultsFileError, match=r"r\.json is truncated"):
+        R.load_results(path)
+
+
+@pytest.mark.parametrize(
+    ("content", "expected"),
+    [
+        (b"", "is empty"),
+        (b"\xff\xfe garbage", "not UTF-8"),
+        (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* line 1, column 22"),
+        (b"[1, 2]", "must hold a JSON object, got list"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema_version 1"),
+    ],
+)
+def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:
+    path = tmp_path / "bad.json"
+    path.write_bytes(content)
+    with pytest.raises(R.ResultsFileError, match=rf"bad\.json .*{expected}"):
+        R.load_results(path)
+
+
+def test_schema_violations_name_the_field(tmp_path: Path) -> None:
+    raw = json.loads(R.dumps_results(_results()))
+    raw["episodes"][1]["metrics"]["rmse"] = "0.3"
+    raw["episodes"][2]["metrics"]["speed"] = 1.0
+    del raw["episodes"][3]["metrics"]["jitter"]
+    raw["method"]["track"] = "C"
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(raw))
+    with pytest.raises(R.ResultsFileError) as info:
+        R.load_results(path)
+    message = str(info.value)
+    assert "bad.json does not match the results schema (4 problem(s))" in message
+    assert "episodes.1.metrics.rmse: Value error, expected a number or null, got the string '0.3'" in message
+    assert "episodes.2.metrics.speed: Extra inputs are not permitted" in message
+    assert "episodes.3.metrics.jitter: Field required" in message
+    assert "method.track: Input should be 'A' or 'B'" in message
+
+
+def test_duplicate_episodes_and_aggregate_mismatch_are_rejected() -> None:
+    raw = json.loads(R.dumps_results(_results()))
+    dup = dict(raw, episodes=raw["episodes"] + raw["episodes"][:1])
+    with pytest.raises(R.ResultsFileError, match=r"listed more than once .*'swarmloc/Ideal-v0', 0"):
+        R.parse_results(json.dumps(dup))
+    no_agg = dict(raw, aggregates={"swarmloc/Ideal-v0": raw["aggregates"]["swarmloc/Ideal-v0"]})
+    with pytest.raises(R.ResultsFileError, match=r"missing \['swarmloc/NLOS-v0'\]"):
+        R.parse_results(json.dumps(no_agg))
+
+
+def test_missing_file_and_size_limit(tmp_path: Path) -> None:
+    with pytest.raises(R.ResultsFileError, match=r"nope\.json does not exist"):
+        R.load_results(tmp_path / "nope.json")
+    path = R.write_results(tmp_path / "r.json", _results())
+    with pytest.raises(R.ResultsFileError, match=r"r\.json is \d+ bytes; the limit is 100 bytes"):
+        R.load_results(path, max_bytes=100)
+
+
+def test_metric_helpers() -> None:
+    with pytest.raises(ValueError, match=r"unknown metric name\(s\) \['accuracy'\]"):
+        R.EpisodeMetrics.of(accuracy=1.0)
+    assert R.suite_sha256([("b", 1), ("a", 2)]) == R.suite_sha256([("a", 2), ("b", 1)])
+    assert R.suite_sha256([("a", 1)]) != R.suite_sha256([("a", 2)])
+    prov = R.collect_provenance()
+    assert prov.created_utc.tzinfo is not None
+    assert prov.created_utc <= datetime.now(timezone.utc)
+    assert prov.machine.cpu_count >= 1
+
+
+def test_results_module_stays_light() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, swarmloc.bench.results as r; "
+        "r.collect_provenance(); "
+        "print(sorted(m for m in ('torch', 'numpy', 'numba', 'swarmloc.leaderboard') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
