@@ -1,0 +1,284 @@
+"""The CEKF backbone as fused numba kernels (``prange`` over the batch).
+
+One 6-state EKF per UAV, state x = [p, v] (world ENU), covariance P.
+
+Prediction (constant acceleration over dt, IMU reading u):
+    x⁻ = F x + G u,  P⁻ = F P Fᵀ + Q,  F = [[I, dt·I], [0, I]],  G = [dt²/2·I; dt·I],
+    Q = σ_imu² G Gᵀ.
+
+Update (madrl §2.3): one joint update over the channels whose trust α > α_th, each with
+R_j = R0_j / max(α_j, α_min); Jacobians at the prior; peer channels use the neighbour's
+broadcast prior position as a known point.
+
+The kernel processes the joint update as a sequence of scalar rows, all linearised at the
+prior x⁻: for rows z_r = h_r(x⁻) + H_r (x − x⁻) + v_r with diagonal R, sequential linear
+updates equal the joint update exactly (up to rounding), so no m×m inverse is needed. The
+scalar covariance update P ← P − c cᵀ / s (c = P Hᵀ, s = H c + r) is the Joseph form
+(I − kH) P (I − kH)ᵀ + k r kᵀ simplified for a scalar row; it is evaluated on the upper
+triangle and mirrored, so P stays exactly symmetric, and stays positive definite since
+s ≥ r ≥ R0 > 0. ``cekf_reference`` holds the readable dense float64 version of the same
+maths; tests hold the two equal.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .channels import ANCHOR, GPS, LANDMARK, PEER
+
+_MIN_RANGE = 1e-9
+
+
+@njit(cache=True, inline="always")
+def predict_uav(x, P, u, dt, q):
+    """In-place prediction of one UAV: x⁻ = F x + G u, P⁻ = F P Fᵀ + Q (Q = q·G Gᵀ)."""
+    h2 = 0.5 * dt * dt
+    for d in range(3):
+        # p⁻ = p + dt·v + dt²/2·u ;  v⁻ = v + dt·u
+        x[d] = x[d] + dt * x[3 + d] + h2 * u[d]
+        x[3 + d] = x[3 + d] + dt * u[d]
+    # F P Fᵀ with F = [[I, dt I], [0, I]] on blocks A = P_pp, B = P_pv, C = P_vv:
+    #   A⁻ = A + dt (B + Bᵀ) + dt² C,  B⁻ = B + dt C,  C⁻ = C
+    for r in range(3):
+        for c in range(3):
+            P[r, c] = P[r, c] + dt * (P[r, 3 + c] + P[3 + r, c]) + dt * dt * P[3 + r, 3 + c]
+    for r in range(3):
+        for c in range(3):
+            P[r, 3 + c] = P[r, 3 + c] + dt * P[3 + r, 3 + c]
+            P[3 + c, r] = P[r, 3 + c]
+    # Q = σ² G Gᵀ: q·dt⁴/4 on p-p, q·dt³/2 on p-v, q·dt² on v-v (diagonal blocks)
+    for d in range(3):
+        P[d, d] += q * h2 * h2
+        P[d, 3 + d] += q * h2 * dt
+        P[3 + d, d] += q * h2 * dt
+        P[3 + d, 3 + d] += q * dt * dt
+
+
+@njit(cache=True, inline="always")
+def _scalar_update(x, P, hvec, col, y, r, c):
+    """One scalar row: H = hvec on the position block (or e_col if col >= 0)."""
+    # c = P Hᵀ
+    if col >= 0:
+        for a in range(6):
+            c[a] = P[a, col]
+        s = c[col] + r  # s = H P Hᵀ + r
+    else:
+        for a in range(6):
+            c[a] = P[a, 0] * hvec[0] + P[a, 1] * hvec[1] + P[a, 2] * hvec[2]
+        s = c[0] * hvec[0] + c[1] * hvec[1] + c[2] * hvec[2] + r
+    # x ← x + k y, k = c / s
+    g = y / s
+    for a in range(6):
+        x[a] += c[a] * g
+    # P ← P − c cᵀ / s (upper triangle, mirrored: exact symmetry)
+    inv_s = 1.0 / s
+    for a in range(6):
+        for b2 in range(a, 6):
+            v = P[a, b2] - c[a] * c[b2] * inv_s
+            P[a, b2] = v
+            P[b2, a] = v
+
+
+@njit(cache=True, inline="always")
+def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
+               alpha_th, alpha_min, active, x0, hvec, c):
+    """Trust-weighted joint update of one UAV over its L channels (in place).
+
+    Args:
+        x, P: the UAV's prior (updated in place to the posterior).
+        z: ``(L, 3)`` measurements; valid, alpha: ``(L,)``.
+        kind, target, r0: ``(L,)`` static channel description.
+        anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        active: ``(L,)`` output, whether the channel was used.
+        x0, hvec, c: scratch 6-, 3-, 6-vectors.
+
+    Returns:
+        Number of scalar rows applied.
+    """
+    rows = 0
+    for a in range(6):
+        x0[a] = x[a]
+    for l in range(kind.shape[0]):
+        al = alpha[l]
+        use = valid[l] and al > alpha_th
+        active[l] = False
+        if not use:
+            continue
+        # R = R0 / max(α, α_min)
+        r = r0[l] / max(al, alpha_min)
+        ch = kind[l]
+        j = target[l]
+        if ch == ANCHOR or ch == PEER:
+            if ch == ANCHOR:
+                q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
+            else:
+                q0, q1, q2 = prior_pos[j, 0], prior_pos[j, 1], prior_pos[j, 2]
+            d0, d1, d2 = x0[0] - q0, x0[1] - q1, x0[2] - q2
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if rng < _MIN_RANGE:
+                continue
+            # H = (p⁻ − q)ᵀ / ‖p⁻ − q‖ at the prior
+            hvec[0], hvec[1], hvec[2] = d0 / rng, d1 / rng, d2 / rng
+            # y = z − h(x⁻) − H (x − x⁻)
+            y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
+            # H enters as +hvec; _scalar_update uses hvec when col < 0
+            _scalar_update(x, P, hvec, -1, y, r, c)
+            rows += 1
+        else:
+            for d in range(3):
+                if ch == GPS:
+                    # z = p + v, H = e_d: y = z_d − p_d
+                    y = z[l, d] - x[d]
+                    _scalar_update(x, P, hvec, d, y, r, c)
+                else:
+                    # landmark: z = m − p; peer_rel: z = p̂_j − p; H = −e_d: y = z_d − q_d + p_d
+                    qd = landmarks[j, d] if ch == LANDMARK else prior_pos[j, d]
+                    y = -(z[l, d] - qd + x[d])  # sign folded: update along +e_d with −y
+                    _scalar_update(x, P, hvec, d, y, r, c)
+                rows += 1
+        active[l] = True
+    return rows
+
+
+@njit(cache=True, parallel=True)
+def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
+    """Predict every UAV of every episode; copy the prior positions to ``prior_pos``."""
+    n_b, n = x.shape[0], x.shape[1]
+    q = imu_sigma * imu_sigma
+    for b in prange(n_b):
+        for i in range(n):
+            predict_uav(x[b, i], P[b, i], imu[b, i], dt, q)
+            for d in range(3):
+                prior_pos[b, i, d] = x[b, i, d]
+
+
+@njit(cache=True, parallel=True)
+def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
+                alpha_th, alpha_min, active, rows):
+    """Trust-weighted joint update of every UAV of every episode (in place).
+
+    Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
+    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, rows ``(B, N)``.
+    """
+    n_b, n = x.shape[0], x.shape[1]
+    for b in prange(n_b):
+        x0 = np.empty(6)
+        hvec = np.empty(3)
+        c = np.empty(6)
+        for i in range(n):
+            rows[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
+                                    r0[i], anchors, landmarks, prior_pos[b], alpha_th, alpha_min,
+                                    active[b, i], x0, hvec, c)
+
+
+@njit(cache=True, parallel=True)
+def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
+             alpha_th, alpha_min, est):
+    """Filter whole sequences: T predict+update steps per episode in one call.
+
+    Shapes: imu ``(T, B, N, 3)``, z ``(T, B, N, L, 3)``, valid/alpha ``(T, B, N, L)``,
+    est ``(T, B, N, 3)`` output posterior positions. Used for offline evaluation and the
+    speed benchmark (no per-step Python dispatch).
+    """
+    n_t, n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2], z.shape[3]
+    q = imu_sigma * imu_sigma
+    for b in prange(n_b):
+        x0 = np.empty(6)
+        hvec = np.empty(3)
+        c = np.empty(6)
+        prior = np.empty((n, 3))
+        active = np.empty(n_l, dtype=np.bool_)
+        for t in range(n_t):
+            for i in range(n):
+                predict_uav(x[b, i], P[b, i], imu[t, b, i], dt, q)
+                for d in range(3):
+                    prior[i, d] = x[b, i, d]
+            for i in range(n):
+                update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
+                           r0[i], anchors, landmarks, prior, alpha_th, alpha_min, active, x0, hvec, c)
+                for d in range(3):
+                    est[t, b, i, d] = x[b, i, d]
+
+
+@njit(cache=True, parallel=True)
+def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos,
+                     resid, pred, nis):
+    """Per-channel innovation features at the prior (before the policy picks trust).
+
+    Outputs ``(B, N, L)``: resid = ‖y‖ (innovation magnitude), pred = predicted distance
+    ‖h(x⁻)‖ to the channel's target (0 for GPS), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0.
+    Invalid channels get zeros.
+    """
+    n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2]
+    for b in prange(n_b):
+        for i in range(n):
+            Pi = P[b, i]
+            for l in range(n_l):
+                if not valid[b, i, l]:
+                    resid[b, i, l] = 0.0
+                    pred[b, i, l] = 0.0
+                    nis[b, i, l] = 0.0
+                    continue
+                ch = kind[i, l]
+                j = target[i, l]
+                if ch == ANCHOR or ch == PEER:
+                    if ch == ANCHOR:
+                        q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
+                    else:
+                        q0, q1, q2 = prior_pos[b, j, 0], prior_pos[b, j, 1], prior_pos[b, j, 2]
+                    d0, d1, d2 = x[b, i, 0] - q0, x[b, i, 1] - q1, x[b, i, 2] - q2
+                    rng = max(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), _MIN_RANGE)
+                    h0, h1, h2 = d0 / rng, d1 / rng, d2 / rng
+                    y = z[b, i, l, 0] - rng
+                    # S = h P_pp hᵀ + R0
+                    s = (h0 * (Pi[0, 0] * h0 + Pi[0, 1] * h1 + Pi[0, 2] * h2)
+                         + h1 * (Pi[1, 0] * h0 + Pi[1, 1] * h1 + Pi[1, 2] * h2)
+                         + h2 * (Pi[2, 0] * h0 + Pi[2, 1] * h1 + Pi[2, 2] * h2) + r0[i, l])
+                    resid[b, i, l] = abs(y)
+                    pred[b, i, l] = rng
+                    nis[b, i, l] = y * y / s
+                else:
+                    # 3-vector channel: S = P_pp + R0·I (H = ±I on position)
+                    yv = np.empty(3)
+                    dist2 = 0.0
+                    for d in range(3):
+                        if ch == GPS:
+                            yv[d] = z[b, i, l, d] - x[b, i, d]
+                        else:
+                            qd = landmarks[j, d] if ch == LANDMARK else prior_pos[b, j, d]
+                            hd = qd - x[b, i, d]
+                            dist2 += hd * hd
+                            yv[d] = z[b, i, l, d] - hd
+                    S = np.empty((3, 3))
+                    for r_ in range(3):
+                        for c_ in range(3):
+                            S[r_, c_] = Pi[r_, c_] + (r0[i, l] if r_ == c_ else 0.0)
+                    nis[b, i, l] = _quad_inv3(S, yv)
+                    resid[b, i, l] = math.sqrt(yv[0] * yv[0] + yv[1] * yv[1] + yv[2] * yv[2])
+                    pred[b, i, l] = math.sqrt(dist2) if ch != GPS else 0.0
+
+
+@njit(cache=True, inline="always")
+def _quad_inv3(S, y):
+    """yᵀ S⁻¹ y for a symmetric positive-definite 3×3 S (Cholesky)."""
+    l00 = math.sqrt(S[0, 0])
+    l10 = S[1, 0] / l00
+    l20 = S[2, 0] / l00
+    l11 = math.sqrt(S[1, 1] - l10 * l10)
+    l21 = (S[2, 1] - l20 * l10) / l11
+    l22 = math.sqrt(S[2, 2] - l20 * l20 - l21 * l21)
+    # forward substitution L w = y; yᵀ S⁻¹ y = ‖w‖²
+    w0 = y[0] / l00
+    w1 = (y[1] - l10 * w0) / l11
+    w2 = (y[2] - l20 * w0 - l21 * w1) / l22
+    return w0 * w0 + w1 * w1 + w2 * w2
+
+
+def initial_covariance(batch: int, n_uav: int, pos_sigma: float, vel_sigma: float) -> np.ndarray:
+    """Diagonal initial covariance ``(B, N, 6, 6)`` from the stated initial uncertainty."""
+    diag = np.array([pos_sigma**2] * 3 + [vel_sigma**2] * 3)
+    return np.broadcast_to(np.diag(diag), (batch, n_uav, 6, 6)).copy()
+

@@ -1,0 +1,213 @@
+"""Per-episode fault schedules, built at reset from the spec and the episode seeds.
+
+Scheduled faults (fixed windows) and randomised ones (drawn from the counter-based RNG
+keyed by the episode seed) end up in the same flat arrays with a leading batch axis, so
+the world kernel has one code path. Windows are half-open in time: ``start <= t < end``.
+Continuous processes (Gauss–Markov NLOS, hybrid noise, packet loss) are parameters here
+and evolve inside the kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .channels import ANCHOR, PEER, PEER_REL, ChannelLayout
+from .rng import Stream, uniform
+from .specs import TaskSpec
+
+BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
+
+
+@dataclass
+class FaultSchedule:
+    """Fault windows of B episodes (all arrays have a leading batch axis B).
+
+    Attributes:
+        bias_time: ``(B, W, 2)`` range-bias windows [start, end).
+        bias_param: ``(B, W, 3)`` [mode, a, b]: constant ``a``, or uniform in [a, b] per draw.
+        bias_mask: ``(B, W, N, L)`` channels a bias window hits.
+        imu_time: ``(B, Wi, 2)`` IMU-fault windows.
+        imu_bias: ``(B, Wi, 3)`` accelerometer bias added inside the window [m/s²].
+        imu_nodes: ``(B, Wi, N)`` faulty UAVs per window.
+        imu_drop: ``(B, Wi)`` whether the faulty UAVs go blind (no measurement at all).
+        outage_time: ``(B, Wo, 2)`` camera outage windows; ``outage_nodes`` ``(B, Wo, N)``.
+        drift_time: ``(B, Wg, 2)`` GPS drift windows; ``drift_rate`` ``(B, Wg, 3)`` [m/s];
+            ``drift_nodes`` ``(B, Wg, N)``.
+        gm_mask: ``(N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(6,)``
+            [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias].
+        hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(5,)``
+            [ratio, t_scale, gauss_sigma, dof_low, dof_high].
+        packet_loss: probability a valid measurement is lost.
+    """
+
+    bias_time: np.ndarray
+    bias_param: np.ndarray
+    bias_mask: np.ndarray
+    imu_time: np.ndarray
+    imu_bias: np.ndarray
+    imu_nodes: np.ndarray
+    imu_drop: np.ndarray
+    outage_time: np.ndarray
+    outage_nodes: np.ndarray
+    drift_time: np.ndarray
+    drift_rate: np.ndarray
+    drift_nodes: np.ndarray
+    gm_mask: np.ndarray
+    gm_param: np.ndarray
+    hybrid_nodes: np.ndarray
+    hybrid_param: np.ndarray
+    packet_loss: float
+
+    @property
+    def faulty_nodes(self) -> np.ndarray:
+        """``(B, N)`` UAVs that suffer an IMU fault at some point of the episode."""
+        return self.imu_nodes.any(axis=1)
+
+    def imu_fault_span(self) -> np.ndarray:
+        """``(B, 2)`` union span [first start, last end) of IMU faults (NaN if none)."""
+        b = self.imu_time.shape[0]
+        if self.imu_time.shape[1] == 0:
+            return np.full((b, 2), np.nan)
+        return np.stack([self.imu_time[:, :, 0].min(axis=1), self.imu_time[:, :, 1].max(axis=1)], axis=1)
+
+
+def _node_mask(nodes: tuple[int, ...], n: int) -> np.ndarray:
+    mask = np.zeros(n, dtype=np.bool_)
+    mask[list(nodes) if nodes else slice(None)] = True
+    return mask
+
+
+def _column(layout: ChannelLayout, i: int, kind: str, index: int) -> int:
+    """Column of UAV i's channel to anchor/peer ``index`` (-1 when it has none)."""
+    kinds = (ANCHOR,) if kind == "anchor" else (PEER, PEER_REL)
+    hits = np.nonzero(np.isin(layout.kind[i], kinds) & (layout.target[i] == index))[0]
+    return int(hits[0]) if hits.size else -1
+
+
+def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> FaultSchedule:
+    """Build the fault schedule of B episodes with the given seeds.
+
+    Args:
+        spec: the task.
+        layout: its channel layout.
+        seeds: ``(B,)`` non-negative episode seeds.
+
+    Returns:
+        The per-episode ``FaultSchedule``.
+    """
+    f = spec.faults
+    n, n_l = spec.n_uav, layout.n_channels
+    n_b = len(seeds)
+
+    # ---- range-bias windows: scheduled steps + random uniform-bias windows
+    bias_rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (time(B,2), param(B,3), mask(B,N,L))
+    for step in f.nlos_steps:
+        mask = np.zeros((n, n_l), dtype=np.bool_)
+        for i in np.nonzero(_node_mask(step.nodes, n))[0]:
+            col = _column(layout, int(i), step.target, step.index)
+            if col >= 0:
+                mask[i, col] = True
+        bias_rows.append((
+            np.tile([step.start, step.end], (n_b, 1)),
+            np.tile([BIAS_CONSTANT, step.bias, step.bias], (n_b, 1)),
+            np.broadcast_to(mask, (n_b, n, n_l)).copy(),
+        ))
+    if f.nlos_uniform is not None:
+        nu = f.nlos_uniform
+        eligible = np.zeros((n, n_l), dtype=np.bool_)
+        kinds = [ANCHOR] * ("anchor" in nu.targets) + [PEER, PEER_REL] * ("peer" in nu.targets)
+        eligible[:] = np.isin(layout.kind, kinds) & layout.linked
+        eligible &= _node_mask(nu.nodes, n)[:, None]
+        for w, (t0, t1) in enumerate(nu.windows):
+            mask = np.zeros((n_b, n, n_l), dtype=np.bool_)
+            for b, seed in enumerate(seeds):
+                for i, l in zip(*np.nonzero(eligible)):
+                    u = uniform(int(seed), w, Stream.SCHEDULE, 1_000_000 + int(i) * n_l + int(l))
+                    mask[b, i, l] = u < nu.link_fraction
+            bias_rows.append((
+                np.tile([t0, t1], (n_b, 1)),
+                np.tile([BIAS_UNIFORM, nu.low, nu.high], (n_b, 1)),
+                mask,
+            ))
+
+    # ---- IMU cascades: scheduled + randomised
+    imu_rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    for c in f.imu_cascades:
+        imu_rows.append((
+            np.tile([c.start, c.end], (n_b, 1)),
+            np.tile(c.bias, (n_b, 1)),
+            np.broadcast_to(_node_mask(c.nodes, n), (n_b, n)).copy(),
+            np.full(n_b, c.blind),
+        ))
+    if f.imu_cascade_random is not None:
+        r = f.imu_cascade_random
+        times, biases, nodes = np.zeros((n_b, 2)), np.zeros((n_b, 3)), np.zeros((n_b, n), dtype=np.bool_)
+        for b, seed in enumerate(seeds):
+            s = int(seed)
+            draw = lambda k: uniform(s, 0, Stream.SCHEDULE, k)  # noqa: E731
+            order = np.argsort([draw(10 + i) for i in range(n)], kind="stable")
+            nodes[b, order[: r.n_faulty]] = True
+            start = r.start_range[0] + (r.start_range[1] - r.start_range[0]) * draw(1)
+            length = r.duration_range[0] + (r.duration_range[1] - r.duration_range[0]) * draw(2)
+            times[b] = (start, start + length)
+            mag = r.bias_magnitude_range[0] + (r.bias_magnitude_range[1] - r.bias_magnitude_range[0]) * draw(3)
+            # direction uniform on the upper hemisphere (bias pushes up and sideways)
+            az, cz = 2 * np.pi * draw(4), draw(5)
+            sz = np.sqrt(1.0 - cz * cz)
+            biases[b] = mag * np.array([sz * np.cos(az), sz * np.sin(az), cz])
+        imu_rows.append((times, biases, nodes, np.full(n_b, r.blind)))
+
+    outage_rows = []
+    if f.vision_outage is not None:
+        for t0, t1 in f.vision_outage.windows:
+            outage_rows.append((np.tile([t0, t1], (n_b, 1)),
+                                np.broadcast_to(_node_mask(f.vision_outage.nodes, n), (n_b, n)).copy()))
+
+    drift_rows = []
+    for d in f.gps_drifts:
+        direction = np.asarray(d.direction, dtype=float)
+        direction /= max(np.linalg.norm(direction), 1e-12)
+        drift_rows.append((np.tile([d.start, d.end], (n_b, 1)), np.tile(d.rate * direction, (n_b, 1)),
+                           np.broadcast_to(_node_mask(d.nodes, n), (n_b, n)).copy()))
+
+    gm_mask = np.zeros((n, n_l), dtype=np.bool_)
+    gm_param = np.zeros(6)
+    if f.nlos_gauss_markov is not None:
+        g = f.nlos_gauss_markov
+        kinds = [ANCHOR] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
+        gm_mask = np.isin(layout.kind, kinds) & layout.linked & _node_mask(g.nodes, n)[:, None]
+        gm_param = np.array([g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias])
+
+    hybrid_nodes = np.zeros(n, dtype=np.bool_)
+    hybrid_param = np.zeros(5)
+    if f.hybrid_noise is not None:
+        h = f.hybrid_noise
+        hybrid_nodes = _node_mask(h.nodes, n)
+        hybrid_param = np.array([h.ratio, h.t_scale, h.gauss_sigma, h.dof_low, max(h.dof_high, h.dof_low)])
+
+    def stack(rows: list, k: int, shape_tail: tuple, dtype=np.float64) -> np.ndarray:
+        if not rows:
+            return np.zeros((n_b, 0, *shape_tail), dtype=dtype)
+        return np.ascontiguousarray(np.stack([row[k] for row in rows], axis=1).astype(dtype))
+
+    return FaultSchedule(
+        bias_time=stack(bias_rows, 0, (2,)),
+        bias_param=stack(bias_rows, 1, (3,)),
+        bias_mask=stack(bias_rows, 2, (n, n_l), np.bool_),
+        imu_time=stack(imu_rows, 0, (2,)),
+        imu_bias=stack(imu_rows, 1, (3,)),
+        imu_nodes=stack(imu_rows, 2, (n,), np.bool_),
+        imu_drop=stack(imu_rows, 3, (), np.bool_),
+        outage_time=stack(outage_rows, 0, (2,)),
+        outage_nodes=stack(outage_rows, 1, (n,), np.bool_),
+        drift_time=stack(drift_rows, 0, (2,)),
+        drift_rate=stack(drift_rows, 1, (3,)),
+        drift_nodes=stack(drift_rows, 2, (n,), np.bool_),
+        gm_mask=np.ascontiguousarray(gm_mask),
+        gm_param=gm_param,
+        hybrid_nodes=hybrid_nodes,
+        hybrid_param=hybrid_param,
+        packet_loss=float(f.packet_loss),
+    )

@@ -1,0 +1,342 @@
+"""Frozen, validated task specifications.
+
+A task is one ``TaskSpec``: the swarm, its truth trajectories, sensors, faults, scoring
+and the nominal filter settings. Specs are pydantic models with ``extra="forbid"``:
+unknown keys and impossible values raise ``pydantic.ValidationError`` naming the field
+and the allowed range. Specs round-trip through JSON (``spec.model_dump_json()`` /
+``TaskSpec.model_validate_json``). Derived quantities (channel count, step count) are
+properties, never stored defaults that could go stale.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Vec3 = tuple[float, float, float]
+PositiveFloat = Annotated[float, Field(gt=0.0)]
+NonNegFloat = Annotated[float, Field(ge=0.0)]
+Probability = Annotated[float, Field(ge=0.0, le=1.0)]
+
+
+class Frozen(BaseModel):
+    """Base for every spec model: immutable, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+# --------------------------------------------------------------------------- truth
+
+
+class AccelCircle(Frozen):
+    """Straight accelerate-then-circle (madrl Exp. 1): from rest along +x, then a circle.
+
+    UAV i starts at ``(0, i·spacing, altitude)``; it accelerates uniformly for
+    ``accel_time`` seconds up to the circle speed ``radius·omega`` and then turns left on
+    a circle of ``radius`` tangent to its straight path.
+    """
+
+    kind: Literal["accel_circle"] = "accel_circle"
+    accel_time: PositiveFloat = 15.0
+    radius: PositiveFloat = 10.0
+    omega: PositiveFloat = 0.25
+    altitude: float = 2.0
+    spacing: float = 3.0
+
+
+class PhasedCircles(Frozen):
+    """Circles with per-UAV phase offsets and a vertical sine (pf-nn §4.1)."""
+
+    kind: Literal["phased_circles"] = "phased_circles"
+    center: Vec3 = (0.0, 0.0, 2.0)
+    radius: PositiveFloat = 5.0
+    omega: float = 0.15
+    phase_step: float = Field(default=1.0471975511965976, description="phase offset between UAVs [rad]")
+    z_amplitude: NonNegFloat = 0.5
+    z_omega: NonNegFloat = 0.3
+    radius_step: NonNegFloat = Field(default=0.0, description="radius grows by this per UAV index [m]")
+
+
+class FigureEightChain(Frozen):
+    """Leader on a figure-eight (Gerono lemniscate); followers trail it in a chain.
+
+    Follower i flies the leader's path delayed by ``i·lag`` seconds, offset sideways by
+    ``i·offset`` metres (a leader–follower chain, imm-arkf §2.4).
+    """
+
+    kind: Literal["figure_eight_chain"] = "figure_eight_chain"
+    radius: PositiveFloat = 20.0
+    omega: PositiveFloat = 0.1
+    altitude: float = 10.0
+    lag: NonNegFloat = 1.0
+    offset: float = 0.5
+
+
+class LeaderFollowerLine(Frozen):
+    """Leaders and followers flying a slow turning line in formation (federated §5)."""
+
+    kind: Literal["leader_follower_line"] = "leader_follower_line"
+    speed: PositiveFloat = 10.0
+    turn_rate: float = 0.005
+    altitude: float = 100.0
+    spacing: PositiveFloat = 30.0
+
+
+class RandomWaypoints(Frozen):
+    """Smooth random waypoints: cosine-blended segments between seeded waypoints."""
+
+    kind: Literal["random_waypoints"] = "random_waypoints"
+    segment_time: PositiveFloat = 8.0
+    low: Vec3 = (-10.0, -10.0, 1.0)
+    high: Vec3 = (10.0, 10.0, 4.0)
+
+
+Trajectory = Annotated[
+    Union[AccelCircle, PhasedCircles, FigureEightChain, LeaderFollowerLine, RandomWaypoints],
+    Field(discriminator="kind"),
+]
+
+# --------------------------------------------------------------------------- sensors
+
+
+class PeerLinks(Frozen):
+    """UWB links between UAVs.
+
+    ``kind="range"``: scalar range; ``"relative_position"``: the neighbour's position
+    relative to the receiver (UWB range + bearing, federated §2.2). ``topology`` says who
+    links to whom: every pair, a chain (i ↔ i±1), or each follower to the leader(s).
+    """
+
+    kind: Literal["none", "range", "relative_position"] = "range"
+    topology: Literal["all", "chain", "leader"] = "all"
+    sigma: PositiveFloat = 0.15
+    max_range: PositiveFloat = 1e6
+
+
+class Sensors(Frozen):
+    """Nominal sensor models (standard deviations are per axis / per range)."""
+
+    imu_sigma: NonNegFloat = 0.1
+    imu_bias_sigma: NonNegFloat = Field(default=0.0, description="constant per-episode accelerometer bias std [m/s²]")
+    anchor_sigma: PositiveFloat = 0.15
+    peers: PeerLinks = PeerLinks()
+    camera_sigma: PositiveFloat = 0.15
+    camera_max_range: PositiveFloat = 10.0
+    gps_sigma: tuple[PositiveFloat, ...] = Field(default=(), description="per-UAV GPS std [m]; empty = no GPS")
+
+
+# --------------------------------------------------------------------------- faults
+
+
+class NlosStep(Frozen):
+    """A scheduled constant positive range bias on one channel kind/index (madrl Exp. 4, 6)."""
+
+    target: Literal["anchor", "peer"] = "anchor"
+    index: int = Field(ge=0, description="anchor index, or peer UAV index")
+    nodes: tuple[int, ...] = Field(default=(), description="receiving UAVs; empty = all")
+    start: NonNegFloat
+    end: PositiveFloat
+    bias: PositiveFloat
+
+    @model_validator(mode="after")
+    def _window(self) -> "NlosStep":
+        if self.end <= self.start:
+            raise ValueError(f"end={self.end} must be > start={self.start}")
+        return self
+
+
+class NlosGaussMarkov(Frozen):
+    """Random time-correlated positive NLOS bias episodes (madrl Exp. 2).
+
+    Each affected link turns NLOS with rate ``onset_rate`` [1/s]; an episode lasts an
+    exponential time of mean ``mean_duration``; during it the bias follows a first-order
+    Gauss–Markov process around ``mean_bias`` with time constant ``tau`` and stationary
+    std ``bias_sigma``, clipped to [0, max_bias].
+    """
+
+    targets: tuple[Literal["anchor", "peer"], ...] = ("anchor", "peer")
+    nodes: tuple[int, ...] = Field(default=(), description="receiving UAVs affected; empty = all")
+    onset_rate: PositiveFloat = 0.02
+    mean_duration: PositiveFloat = 6.0
+    mean_bias: NonNegFloat = 2.5
+    bias_sigma: NonNegFloat = 1.0
+    tau: PositiveFloat = 2.0
+    max_bias: PositiveFloat = 5.0
+
+
+class NlosUniform(Frozen):
+    """UWB NLOS windows with a bias uniform in [low, high] per measurement (dtvirm §4)."""
+
+    targets: tuple[Literal["anchor", "peer"], ...] = ("peer",)
+    windows: tuple[tuple[float, float], ...] = ((30.0, 40.0),)
+    nodes: tuple[int, ...] = ()
+    link_fraction: Probability = 0.3
+    low: NonNegFloat = 3.0
+    high: PositiveFloat = 5.0
+
+
+class ImuCascade(Frozen):
+    """IMU bias on chosen nodes, which also go blind (madrl Exp. 5).
+
+    With ``blind=True`` the faulty nodes receive no measurement inside the window and
+    rely solely on uncorrected dead reckoning, as in the paper; their broadcast estimates
+    then carry the drift to their neighbours.
+    """
+
+    nodes: tuple[int, ...]
+    start: NonNegFloat
+    end: PositiveFloat
+    bias: Vec3 = (1.5, 1.2, 0.5)
+    blind: bool = True
+
+    @model_validator(mode="after")
+    def _window(self) -> "ImuCascade":
+        if self.end <= self.start:
+            raise ValueError(f"end={self.end} must be > start={self.start}")
+        return self
+
+
+class ImuCascadeRandom(Frozen):
+    """Randomised cascade: ``n_faulty`` nodes drawn per episode, start uniform in a range."""
+
+    n_faulty: int = Field(default=2, ge=1)
+    start_range: tuple[NonNegFloat, NonNegFloat] = (10.0, 25.0)
+    duration_range: tuple[PositiveFloat, PositiveFloat] = (10.0, 15.0)
+    bias_magnitude_range: tuple[PositiveFloat, PositiveFloat] = (1.0, 2.0)
+    blind: bool = True
+
+
+class VisionOutage(Frozen):
+    """Camera blackouts: no landmark channel is valid inside a window."""
+
+    windows: tuple[tuple[float, float], ...] = ((30.0, 40.0), (60.0, 70.0))
+    nodes: tuple[int, ...] = ()
+
+
+class GpsDrift(Frozen):
+    """Gradual GPS fault: the fix drifts at ``rate`` [m/s] along ``direction`` (federated §5)."""
+
+    nodes: tuple[int, ...]
+    start: NonNegFloat
+    end: PositiveFloat
+    rate: PositiveFloat = 0.1
+    direction: Vec3 = (1.0, 0.0, 0.0)
+
+
+class HybridNoise(Frozen):
+    """GPS noise v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²) with ν drawn in [dof_low, dof_high] (imm-arkf eq. 1)."""
+
+    ratio: Probability
+    nodes: tuple[int, ...] = ()
+    t_scale: PositiveFloat = 1.0
+    gauss_sigma: PositiveFloat = 1.0
+    dof_low: int = Field(default=25, ge=1)
+    dof_high: int = Field(default=50, ge=1)
+
+
+class Faults(Frozen):
+    """Every fault of a task; all are seeded and composable."""
+
+    nlos_steps: tuple[NlosStep, ...] = ()
+    nlos_gauss_markov: NlosGaussMarkov | None = None
+    nlos_uniform: NlosUniform | None = None
+    imu_cascades: tuple[ImuCascade, ...] = ()
+    imu_cascade_random: ImuCascadeRandom | None = None
+    vision_outage: VisionOutage | None = None
+    packet_loss: Probability = 0.0
+    gps_drifts: tuple[GpsDrift, ...] = ()
+    hybrid_noise: HybridNoise | None = None
+
+
+# --------------------------------------------------------------------------- filter / scoring
+
+
+class FilterSettings(Frozen):
+    """The CEKF backbone's nominal settings (madrl §2.3)."""
+
+    alpha_th: Probability = 0.05
+    alpha_min: Annotated[float, Field(gt=0.0, le=1.0)] = 0.01
+    init_pos_sigma: PositiveFloat = 0.5
+    init_vel_sigma: PositiveFloat = 0.2
+
+
+class Scoring(Frozen):
+    """Which nodes and interval are scored, and the fault window metrics look at."""
+
+    nodes: tuple[int, ...] = Field(default=(), description="scored UAVs; empty = all")
+    healthy_nodes: tuple[int, ...] = Field(default=(), description="nodes for healthy-node RMSE; empty = not defined")
+    fault_window: tuple[float, float] | None = None
+    start: NonNegFloat = 0.0
+
+
+class TaskSpec(Frozen):
+    """One benchmark task: everything the world needs to simulate an episode."""
+
+    name: str = Field(min_length=1, max_length=64)
+    version: int = Field(default=0, ge=0)
+    n_uav: int = Field(ge=1, le=256)
+    dt: PositiveFloat = 0.1
+    duration: PositiveFloat
+    trajectory: Trajectory
+    anchors: tuple[Vec3, ...] = ()
+    landmarks: tuple[Vec3, ...] = ()
+    sensors: Sensors = Sensors()
+    faults: Faults = Faults()
+    filter: FilterSettings = FilterSettings()
+    scoring: Scoring = Scoring()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "TaskSpec":
+        n = self.n_uav
+        if self.duration < self.dt:
+            raise ValueError(f"duration={self.duration} must be >= dt={self.dt}")
+        gps = self.sensors.gps_sigma
+        if gps and len(gps) != n:
+            raise ValueError(f"sensors.gps_sigma has {len(gps)} entries; expected n_uav={n} (or none)")
+        node_lists = [("scoring.nodes", self.scoring.nodes), ("scoring.healthy_nodes", self.scoring.healthy_nodes)]
+        f = self.faults
+        node_lists += [("faults.imu_cascades.nodes", c.nodes) for c in f.imu_cascades]
+        node_lists += [("faults.nlos_steps.nodes", s.nodes) for s in f.nlos_steps]
+        node_lists += [("faults.gps_drifts.nodes", d.nodes) for d in f.gps_drifts]
+        for field, nodes in node_lists:
+            bad = [i for i in nodes if not 0 <= i < n]
+            if bad:
+                raise ValueError(f"{field} contains {bad}; UAV indices must be in [0, {n - 1}]")
+        for s in f.nlos_steps:
+            limit = len(self.anchors) if s.target == "anchor" else n
+            if s.index >= limit:
+                raise ValueError(f"faults.nlos_steps index={s.index} out of range for {s.target} (count {limit})")
+        if f.imu_cascade_random is not None and f.imu_cascade_random.n_faulty >= n:
+            raise ValueError(f"faults.imu_cascade_random.n_faulty={f.imu_cascade_random.n_faulty} must be < n_uav={n}")
+        if (f.gps_drifts or f.hybrid_noise) and not gps:
+            raise ValueError("GPS faults need sensors.gps_sigma for every UAV")
+        if f.vision_outage is not None and not self.landmarks:
+            raise ValueError("faults.vision_outage needs landmarks")
+        if not (self.anchors or self.landmarks or gps or self.sensors.peers.kind != "none"):
+            raise ValueError("a task needs at least one measurement channel (anchors, landmarks, gps or peers)")
+        return self
+
+    # ---- derived quantities
+    @property
+    def task_id(self) -> str:
+        """Registered ID, e.g. ``swarmloc/NLOS-v0``."""
+        return f"swarmloc/{self.name}-v{self.version}"
+
+    @property
+    def n_steps(self) -> int:
+        """Filter steps per episode (T)."""
+        return int(round(self.duration / self.dt))
+
+    @property
+    def n_peer_channels(self) -> int:
+        return 0 if self.sensors.peers.kind == "none" else self.n_uav - 1
+
+    @property
+    def n_channels(self) -> int:
+        """Channels per UAV (L): anchors + peers + landmark slots + GPS."""
+        return len(self.anchors) + self.n_peer_channels + len(self.landmarks) + (1 if self.sensors.gps_sigma else 0)
+
+    @property
+    def scored_nodes(self) -> tuple[int, ...]:
+        return self.scoring.nodes or tuple(range(self.n_uav))

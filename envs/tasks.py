@@ -1,0 +1,192 @@
+"""The task catalogue: one frozen ``TaskSpec`` per registered ID.
+
+Parameters come from the papers in ``shared/papers`` (cited per task). UAV indices are
+0-based; where a paper numbers nodes from 1 the docstring of the task says so.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+from .specs import (
+    AccelCircle,
+    Faults,
+    FigureEightChain,
+    FilterSettings,
+    GpsDrift,
+    HybridNoise,
+    ImuCascade,
+    ImuCascadeRandom,
+    LeaderFollowerLine,
+    NlosGaussMarkov,
+    NlosStep,
+    PeerLinks,
+    PhasedCircles,
+    Scoring,
+    Sensors,
+    TaskSpec,
+    VisionOutage,
+)
+
+# six anchors around the accelerate-then-circle course (x ∈ [0, 29], y ∈ [0, 29] m)
+SIX_ANCHORS = ((-5.0, -5.0, 0.5), (35.0, -5.0, 3.0), (35.0, 35.0, 0.5), (-5.0, 35.0, 3.0),
+               (15.0, -5.0, 6.0), (15.0, 35.0, 6.0))
+EIGHT_ANCHORS = SIX_ANCHORS + ((-5.0, 15.0, 6.0), (35.0, 15.0, 0.5))
+# a sparse three-anchor topology (madrl Exp. 5)
+THREE_ANCHORS = ((-15.0, -15.0, 0.5), (15.0, -15.0, 2.5), (0.0, 15.0, 4.5))
+# eight anchors on the walls of a 20 × 20 m hall around the circling swarm (madrl Exp. 3)
+HALL_ANCHORS = ((-10.0, -10.0, 0.5), (10.0, -10.0, 3.5), (10.0, 10.0, 0.5), (-10.0, 10.0, 3.5),
+                (0.0, -10.0, 5.0), (0.0, 10.0, 5.0), (-10.0, 0.0, 1.0), (10.0, 0.0, 1.0))
+
+
+def hall_landmarks(count: int = 20, size: tuple[float, float, float] = (30.0, 20.0, 5.0)) -> tuple:
+    """Deterministic, well-spread landmark positions in a hall (additive recurrences)."""
+    steps = (0.6180339887, 0.7548776662, 0.5698402910)
+    return tuple(
+        tuple(round(size[d] * (0.05 + 0.9 * (((k + 1) * steps[d]) % 1.0)), 3) for d in range(3))
+        for k in range(count)
+    )
+
+
+def ideal() -> TaskSpec:
+    return TaskSpec(
+        name="Ideal", n_uav=4, duration=40.0, trajectory=AccelCircle(), anchors=SIX_ANCHORS,
+        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
+    )
+
+
+def nlos() -> TaskSpec:
+    return TaskSpec(
+        name="NLOS", n_uav=4, duration=50.0, trajectory=AccelCircle(), anchors=EIGHT_ANCHORS,
+        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
+        faults=Faults(nlos_gauss_markov=NlosGaussMarkov(onset_rate=0.02, mean_duration=6.0, mean_bias=2.5,
+                                                        bias_sigma=1.0, tau=2.0, max_bias=5.0)),
+    )
+
+
+def nlos_step() -> TaskSpec:
+    return TaskSpec(
+        name="NLOSStep", n_uav=4, duration=50.0, trajectory=AccelCircle(), anchors=EIGHT_ANCHORS,
+        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
+        faults=Faults(nlos_steps=(NlosStep(target="anchor", index=0, start=20.0, end=30.0, bias=3.0),)),
+        scoring=Scoring(fault_window=(20.0, 30.0)),
+    )
+
+
+def scale(n: int) -> Callable[[], TaskSpec]:
+    def make() -> TaskSpec:
+        noisy = tuple(range(1, n, 2))  # every second UAV flies through NLOS-heavy areas
+        return TaskSpec(
+            name=f"Scale{n}", n_uav=n, duration=40.0,
+            trajectory=PhasedCircles(center=(0.0, 0.0, 2.5), radius=6.0, omega=0.2, phase_step=2 * math.pi / n,
+                                     z_amplitude=0.5, z_omega=0.3),
+            anchors=HALL_ANCHORS,
+            sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.2, peers=PeerLinks(kind="range", sigma=0.2)),
+            faults=Faults(nlos_gauss_markov=NlosGaussMarkov(targets=("anchor", "peer"), nodes=noisy,
+                                                            onset_rate=0.05, mean_duration=5.0, mean_bias=3.0,
+                                                            bias_sigma=1.0, tau=2.0, max_bias=5.0)),
+        )
+    return make
+
+
+def cascaded_fault() -> TaskSpec:
+    return TaskSpec(
+        name="CascadedFault", n_uav=4, duration=50.0,
+        trajectory=PhasedCircles(center=(0.0, 0.0, 2.0), radius=8.0, omega=0.15, phase_step=math.pi / 2,
+                                 z_amplitude=0.5, z_omega=0.2),
+        anchors=THREE_ANCHORS,
+        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
+        faults=Faults(imu_cascades=(ImuCascade(nodes=(1, 2), start=20.0, end=35.0, bias=(1.5, 1.2, 0.5)),)),
+        scoring=Scoring(healthy_nodes=(0, 3), fault_window=(20.0, 35.0)),
+    )
+
+
+def cascaded_fault_random() -> TaskSpec:
+    return TaskSpec(
+        name="CascadedFaultRandom", n_uav=4, duration=50.0,
+        trajectory=PhasedCircles(center=(0.0, 0.0, 2.0), radius=8.0, omega=0.15, phase_step=math.pi / 2,
+                                 z_amplitude=0.5, z_omega=0.2),
+        anchors=THREE_ANCHORS,
+        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
+        faults=Faults(imu_cascade_random=ImuCascadeRandom(n_faulty=2, start_range=(15.0, 25.0),
+                                                          duration_range=(10.0, 15.0),
+                                                          bias_magnitude_range=(1.5, 2.0))),
+        scoring=Scoring(healthy_nodes=(), fault_window=None),
+    )
+
+
+def vision_loss() -> TaskSpec:
+    return TaskSpec(
+        name="VisionLoss", n_uav=6, duration=100.0,
+        trajectory=PhasedCircles(center=(15.0, 10.0, 2.5), radius=0.5 / 0.15, omega=0.15, phase_step=math.pi / 3,
+                                 z_amplitude=0.5, z_omega=0.2),
+        landmarks=hall_landmarks(),
+        sensors=Sensors(imu_sigma=0.1, camera_sigma=0.15, camera_max_range=10.0,
+                        peers=PeerLinks(kind="range", sigma=0.2)),
+        faults=Faults(vision_outage=VisionOutage(windows=((30.0, 40.0), (60.0, 70.0)))),
+        scoring=Scoring(fault_window=(30.0, 40.0)),
+    )
+
+
+def hybrid_noise(percent: int) -> Callable[[], TaskSpec]:
+    def make() -> TaskSpec:
+        return TaskSpec(
+            name=f"HybridNoise{percent}", n_uav=9, duration=60.0,
+            trajectory=FigureEightChain(radius=20.0, omega=0.1, altitude=10.0, lag=1.5, offset=0.0),
+            sensors=Sensors(imu_sigma=0.1, gps_sigma=(0.1,) + (1.0,) * 8,
+                            peers=PeerLinks(kind="range", topology="chain", sigma=0.2)),
+            faults=Faults(hybrid_noise=HybridNoise(ratio=percent / 100.0, nodes=tuple(range(1, 9)))),
+            scoring=Scoring(nodes=tuple(range(1, 9))),
+            filter=FilterSettings(init_pos_sigma=1.0, init_vel_sigma=0.5),
+        )
+    return make
+
+
+def gradual_fault() -> TaskSpec:
+    return TaskSpec(
+        name="GradualFault", n_uav=3, dt=1.0, duration=300.0,
+        trajectory=LeaderFollowerLine(speed=10.0, turn_rate=0.005, altitude=100.0, spacing=30.0),
+        sensors=Sensors(imu_sigma=0.05, imu_bias_sigma=0.001, gps_sigma=(1.0, 10.0, 10.0),
+                        peers=PeerLinks(kind="relative_position", topology="leader", sigma=0.03)),
+        faults=Faults(gps_drifts=(GpsDrift(nodes=(1, 2), start=100.0, end=200.0, rate=0.1,
+                                           direction=(1.0, 1.0, 0.0)),)),
+        scoring=Scoring(nodes=(1, 2), fault_window=(100.0, 300.0)),
+        filter=FilterSettings(init_pos_sigma=5.0, init_vel_sigma=0.5),
+    )
+
+
+#: registered ID → spec factory
+CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
+    "swarmloc/Ideal-v0": ideal,
+    "swarmloc/NLOS-v0": nlos,
+    "swarmloc/NLOSStep-v0": nlos_step,
+    **{f"swarmloc/Scale{n}-v0": scale(n) for n in (2, 4, 6, 8, 16, 32)},
+    "swarmloc/CascadedFault-v0": cascaded_fault,
+    "swarmloc/CascadedFaultRandom-v0": cascaded_fault_random,
+    "swarmloc/VisionLoss-v0": vision_loss,
+    **{f"swarmloc/HybridNoise{p}-v0": hybrid_noise(p) for p in (10, 30, 50)},
+    "swarmloc/GradualFault-v0": gradual_fault,
+}
+
+
+def get_spec(task_id: str, **overrides) -> TaskSpec:
+    """The spec of a registered task, with optional validated field overrides.
+
+    Args:
+        task_id: e.g. ``"swarmloc/NLOS-v0"`` (the ``swarmloc/`` prefix may be omitted).
+        **overrides: top-level spec fields to replace (validated like the spec itself).
+
+    Raises:
+        KeyError: unknown task ID (the message lists the known ones).
+        pydantic.ValidationError: an override is unknown or out of range.
+    """
+    key = task_id if task_id.startswith("swarmloc/") else f"swarmloc/{task_id}"
+    if key not in CATALOGUE:
+        raise KeyError(f"unknown task ID {task_id!r}; known: {', '.join(sorted(CATALOGUE))}")
+    spec = CATALOGUE[key]()
+    if not overrides:
+        return spec
+    data = spec.model_dump()
+    data.update(overrides)
+    return TaskSpec.model_validate(data)
