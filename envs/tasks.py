@@ -175,7 +175,8 @@ def get_spec(task_id: str, **overrides) -> TaskSpec:
 
     Args:
         task_id: e.g. ``"swarmloc/NLOS-v0"`` (the ``swarmloc/`` prefix may be omitted).
-        **overrides: top-level spec fields to replace (validated like the spec itself).
+        **overrides: spec fields to replace; nested dicts merge into the nested models
+            (e.g. ``sensors={"imu_sigma": 0.0}``). Validated like the spec itself.
 
     Raises:
         KeyError: unknown task ID (the message lists the known ones).
@@ -187,6 +188,15 @@ def get_spec(task_id: str, **overrides) -> TaskSpec:
     spec = CATALOGUE[key]()
     if not overrides:
         return spec
-    data = spec.model_dump()
-    data.update(overrides)
-    return TaskSpec.model_validate(data)
+    return TaskSpec.model_validate(_merge(spec.model_dump(), overrides))
+
+
+def _merge(base: dict, changes: dict) -> dict:
+    """Recursively merge ``changes`` into ``base`` (nested dicts merge; other values replace)."""
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
