@@ -1,0 +1,512 @@
+"""The results store: accepted submissions in a SQL database (SQLAlchemy 2 ORM).
+
+Where: the ``db_url`` argument, else the ``SWARMLOC_DB`` environment variable, else a
+SQLite file ``leaderboard.db`` in ``platformdirs.user_data_dir("swarmloc")``. Only
+portable SQL is used (ORM queries, generic column types), so a PostgreSQL URL such as
+``postgresql+psycopg://user@host/db`` works unchanged once its driver is installed.
+
+Guarantees:
+
+* **Schema versioning.** Table ``swarmloc_schema_version`` holds one row with the
+  schema version. Opening a store creates a fresh schema, or upgrades an older one by
+  applying :data:`MIGRATIONS` in order inside one transaction; a newer schema is refused.
+* **Transactional writes.** A submission and its per-task aggregates are written in one
+  transaction: a failure leaves the store unchanged.
+* **Duplicates.** (method hash, suite name, suite version) is unique; a second submission
+  raises :class:`~swarmloc.leaderboard.errors.DuplicateSubmission`.
+* **Concurrency.** On SQLite, write transactions start with ``BEGIN IMMEDIATE`` (so two
+  writers queue instead of dead-locking on a lock upgrade), wait on a busy timeout, and
+  are retried with back-off if the database stays locked.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, TypeVar
+
+from sqlalchemy import (
+    BigInteger,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+    create_engine,
+    event,
+    func,
+    inspect,
+    select,
+)
+from sqlalchemy.engine import Connection, Engine, make_url
+from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, relationship
+
+from swarmloc.bench.results import Aggregate
+from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError
+
+ENV_VAR: str = "SWARMLOC_DB"
+"""Environment variable naming the store's database URL."""
+
+SCHEMA_VERSION: int = 1
+"""Schema version written by this code."""
+
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {}
+"""``from_version -> upgrade(connection)`` bringing a store from ``v`` to ``v + 1``.
+
+Add an entry (and bump :data:`SCHEMA_VERSION`) whenever the tables change; each step
+runs inside the opening transaction, so a failed upgrade leaves the old schema intact.
+Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores upgrade too.
+"""
+
+SHIPPED_REFERENCE_METHODS: frozenset[str] = frozenset(
+    {
+        "uniform",
+        "oracle",
+        "classical",
+        "chi2-gate",
+        "mappo",
+        "dead-reckoning",
+        "pf",
+        "pf-nn",
+        "imm",
+        "imm-arkf",
+        "federated",
+        "ci",
+    }
+)
+"""Registered names of the reference methods shipped with swarmloc.
+
+Only these entry points may be submitted with ``trust=True`` (verification skipped).
+Keep in sync with the method registry in ``swarmloc.agents``.
+"""
+
+_RETRIES = 8
+
+
+class Base(DeclarativeBase):
+    """Declarative base of the store's tables."""
+
+
+class SchemaVersionRow(Base):
+    """The single row recording the schema version."""
+
+    __tablename__ = "swarmloc_schema_version"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    version: Mapped[int] = mapped_column(Integer, nullable=False)
+
+
+class SubmissionRow(Base):
+    """One accepted submission."""
+
+    __tablename__ = "submissions"
+    __table_args__ = (
+        UniqueConstraint("method_hash", "suite_name", "suite_version", name="uq_method_suite"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    created_utc: Mapped[datetime] = mapped_column(DateTime(timezone=True), nullable=False)
+    name: Mapped[str] = mapped_column(String(64), nullable=False)
+    authors: Mapped[str] = mapped_column(String(256), nullable=False)
+    url: Mapped[str | None] = mapped_column(String(512))
+    description: Mapped[str] = mapped_column(Text, nullable=False)
+    track: Mapped[str] = mapped_column(String(1), nullable=False)
+    privileged: Mapped[bool] = mapped_column(nullable=False)
+    deterministic: Mapped[bool] = mapped_column(nullable=False)
+    entry_point: Mapped[str] = mapped_column(String(512), nullable=False)
+    method_hash: Mapped[str] = mapped_column(String(64), nullable=False)
+    weights_sha256: Mapped[str | None] = mapped_column(String(64))
+    suite_name: Mapped[str] = mapped_column(String(128), nullable=False)
+    suite_version: Mapped[str] = mapped_column(String(64), nullable=False)
+    suite_sha256: Mapped[str] = mapped_column(String(64), nullable=False)
+    verified: Mapped[bool] = mapped_column(nullable=False)
+    trusted: Mapped[bool] = mapped_column(nullable=False)
+    verification_seed: Mapped[int | None] = mapped_column(BigInteger)
+    verified_episodes: Mapped[int] = mapped_column(Integer, nullable=False)
+    score_mean: Mapped[float | None] = mapped_column(Float)
+    score_iqm: Mapped[float | None] = mapped_column(Float)
+    score_ci_low: Mapped[float | None] = mapped_column(Float)
+    score_ci_high: Mapped[float | None] = mapped_column(Float)
+    delay_ms: Mapped[float | None] = mapped_column(Float)
+    energy_j: Mapped[float | None] = mapped_column(Float)
+    jitter: Mapped[float | None] = mapped_column(Float)
+    package_version: Mapped[str] = mapped_column(String(64), nullable=False)
+    git_commit: Mapped[str | None] = mapped_column(String(64))
+    results_json: Mapped[str] = mapped_column(Text, nullable=False)
+
+    aggregates: Mapped[list[TaskAggregateRow]] = relationship(
+        back_populates="submission", cascade="all, delete-orphan", lazy="selectin"
+    )
+
+
+class TaskAggregateRow(Base):
+    """Mean, IQM and 95 % CI of one metric on one task for one submission."""
+
+    __tablename__ = "task_aggregates"
+    __table_args__ = (
+        UniqueConstraint("submission_id", "task", "metric", name="uq_submission_task_metric"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    submission_id: Mapped[int] = mapped_column(
+        ForeignKey("submissions.id", ondelete="CASCADE"), nullable=False, index=True
+    )
+    task: Mapped[str] = mapped_column(String(128), nullable=False)
+    metric: Mapped[str] = mapped_column(String(32), nullable=False)
+    mean: Mapped[float] = mapped_column(Float, nullable=False)
+    iqm: Mapped[float] = mapped_column(Float, nullable=False)
+    ci_low: Mapped[float] = mapped_column(Float, nullable=False)
+    ci_high: Mapped[float] = mapped_column(Float, nullable=False)
+
+    submission: Mapped[SubmissionRow] = relationship(back_populates="aggregates")
+
+
+@dataclass(frozen=True)
+class LeaderboardEntry:
+    """A stored submission, as views read it.
+
+    ``score`` is the mean normalized score over all (task, seed) runs with its IQM and
+    task-stratified 95 % CI; ``delay_ms``, ``energy_j``, ``jitter`` are means over all
+    runs; ``task_aggregates[task][metric]`` holds per-task statistics (undefined metrics
+    absent). ``results_json`` is the submitted results file, byte for byte.
+    """
+
+    name: str
+    authors: str
+    url: str | None
+    description: str
+    track: str
+    privileged: bool
+    deterministic: bool
+    entry_point: str
+    method_hash: str
+    weights_sha256: str | None
+    suite_name: str
+    suite_version: str
+    suite_sha256: str
+    verified: bool
+    trusted: bool
+    verification_seed: int | None
+    verified_episodes: int
+    score: Aggregate | None
+    delay_ms: float | None
+    energy_j: float | None
+    jitter: float | None
+    package_version: str
+    git_commit: str | None
+    results_json: str
+    task_aggregates: dict[str, dict[str, Aggregate]] = field(default_factory=dict)
+    created_utc: datetime = field(default_factory=lambda: datetime.now(timezone.utc))
+    id: int | None = None
+
+    @property
+    def tasks(self) -> list[str]:
+        """Task IDs with aggregates, sorted."""
+        return sorted(self.task_aggregates)
+
+
+def default_db_url() -> str:
+    """``SWARMLOC_DB`` if set, else the SQLite file under the user data directory."""
+    env = os.environ.get(ENV_VAR)
+    if env:
+        return env
+    from platformdirs import user_data_dir
+
+    return f"sqlite:///{Path(user_data_dir('swarmloc')) / 'leaderboard.db'}"
+
+
+T = TypeVar("T")
+
+
+class LeaderboardStore:
+    """Accepted submissions, in SQLite by default or any SQLAlchemy database URL.
+
+    Args:
+        db_url: Database URL; default :func:`default_db_url`.
+        busy_timeout_s: SQLite only: how long a writer waits for the lock per attempt.
+
+    Raises:
+        StoreError: if the URL is invalid, the database cannot be opened, or its schema
+            is newer than this code or unknown.
+    """
+
+    def __init__(self, db_url: str | None = None, *, busy_timeout_s: float = 30.0) -> None:
+        raw = db_url or default_db_url()
+        try:
+            url = make_url(raw)
+        except Exception as err:  # sqlalchemy raises ArgumentError
+            raise StoreError(f"invalid database URL {raw!r}: {err}") from None
+        self._is_sqlite = url.get_backend_name() == "sqlite"
+        if self._is_sqlite and url.database not in (None, "", ":memory:"):
+            Path(url.database).expanduser().parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._engine = create_engine(url)
+        except Exception as err:  # missing driver, bad options
+            raise StoreError(f"cannot open database {url.render_as_string()}: {err}") from None
+        if self._is_sqlite:
+            self._configure_sqlite(self._engine, busy_timeout_s)
+            self._write_engine = self._engine.execution_options(swarmloc_begin="IMMEDIATE")
+        else:
+            self._write_engine = self._engine
+        self.url = url.render_as_string(hide_password=True)
+        self._ensure_schema()
+
+    # -- connection set-up -------------------------------------------------------------
+
+    @staticmethod
+    def _configure_sqlite(engine: Engine, busy_timeout_s: float) -> None:
+        @event.listens_for(engine, "connect")
+        def _on_connect(dbapi_connection: Any, _record: Any) -> None:
+            # We issue BEGIN ourselves (below), so pysqlite must not.
+            dbapi_connection.isolation_level = None
+            cursor = dbapi_connection.cursor()
+            cursor.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
+            cursor.execute("PRAGMA foreign_keys = ON")
+            cursor.close()
+
+        @event.listens_for(engine, "begin")
+        def _on_begin(connection: Connection) -> None:
+            mode = connection.get_execution_options().get("swarmloc_begin", "DEFERRED")
+            connection.exec_driver_sql(f"BEGIN {mode}")
+
+    def _retrying(self, work: Callable[[], T]) -> T:
+        """Run ``work``; on SQLite retry with back-off while the database is locked."""
+        for attempt in range(_RETRIES):
+            try:
+                return work()
+            except OperationalError as err:
+                locked = "locked" in str(err).lower() or "busy" in str(err).lower()
+                if not (self._is_sqlite and locked) or attempt == _RETRIES - 1:
+                    raise
+                time.sleep(min(2.0, 0.05 * 2**attempt) * (0.5 + random.random()))
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    @contextmanager
+    def _writing(self) -> Iterator[Session]:
+        with Session(self._write_engine, expire_on_commit=False) as session, session.begin():
+            yield session
+
+    @contextmanager
+    def _reading(self) -> Iterator[Session]:
+        with Session(self._engine) as session, session.begin():
+            yield session
+
+    # -- schema ----------------------------------------------------------------------
+
+    def _ensure_schema(self) -> None:
+        def work() -> None:
+            with self._write_engine.begin() as conn:
+                tables = set(inspect(conn).get_table_names())
+                if SchemaVersionRow.__tablename__ not in tables:
+                    if tables & {SubmissionRow.__tablename__, TaskAggregateRow.__tablename__}:
+                        raise StoreError(
+                            f"database {self.url} has leaderboard tables but no "
+                            f"{SchemaVersionRow.__tablename__} table; refusing to guess its version"
+                        )
+                    Base.metadata.create_all(conn)
+                    with Session(conn) as session:
+                        session.add(SchemaVersionRow(id=1, version=SCHEMA_VERSION))
+                        session.flush()
+                    return
+                with Session(conn) as session:
+                    row = session.get(SchemaVersionRow, 1)
+                    version = row.version if row is not None else None
+                    if version is None:
+                        raise StoreError(f"database {self.url} has an empty schema version table")
+                    if version > SCHEMA_VERSION:
+                        raise StoreError(
+                            f"database {self.url} has schema version {version}; this swarmloc "
+                            f"supports up to {SCHEMA_VERSION}. Upgrade swarmloc."
+                        )
+                    while version < SCHEMA_VERSION:
+                        if version not in MIGRATIONS:
+                            raise StoreError(
+                                f"no migration from schema version {version} to {version + 1}"
+                            )
+                        MIGRATIONS[version](conn)
+                        version += 1
+                    row.version = version
+                    session.flush()
+
+        try:
+            self._retrying(work)
+        except OperationalError as err:
+            raise StoreError(f"cannot open database {self.url}: {err.orig}") from None
+
+    def schema_version(self) -> int:
+        """The schema version recorded in the database."""
+        with self._reading() as session:
+            row = session.get(SchemaVersionRow, 1)
+            assert row is not None
+            return row.version
+
+    # -- writes ----------------------------------------------------------------------
+
+    def find_duplicate(self, method_hash: str, suite_name: str, suite_version: str) -> int | None:
+        """ID of a stored submission of the same method on the same suite, if any."""
+        with self._reading() as session:
+            return session.scalar(
+                select(SubmissionRow.id).where(
+                    SubmissionRow.method_hash == method_hash,
+                    SubmissionRow.suite_name == suite_name,
+                    SubmissionRow.suite_version == suite_version,
+                )
+            )
+
+    def _duplicate_error(self, entry: LeaderboardEntry, existing: int | None) -> DuplicateSubmission:
+        return DuplicateSubmission(
+            f"method {entry.entry_point!r} (hash {entry.method_hash[:12]}…) is already on the "
+            f"leaderboard for suite {entry.suite_name!r} version {entry.suite_version!r}"
+            + (f" as submission #{existing}" if existing is not None else "")
+            + "; change the method or its weights to submit again"
+        )
+
+    def add(self, entry: LeaderboardEntry) -> int:
+        """Store a submission and its per-task aggregates in one transaction.
+
+        Args:
+            entry: The submission (its ``id`` is ignored).
+
+        Returns:
+            The new submission ID.
+
+        Raises:
+            DuplicateSubmission: same method hash and suite already stored.
+        """
+        columns = {c.key for c in SubmissionRow.__table__.columns} - {"id"}
+        values = {k: getattr(entry, k) for k in columns if k not in ("score_mean", "score_iqm",
+                                                                    "score_ci_low", "score_ci_high")}
+        score = entry.score
+        values.update(
+            score_mean=score.mean if score else None,
+            score_iqm=score.iqm if score else None,
+            score_ci_low=score.ci_low if score else None,
+            score_ci_high=score.ci_high if score else None,
+        )
+
+        def work() -> int:
+            with self._writing() as session:
+                existing = session.scalar(
+                    select(SubmissionRow.id).where(
+                        SubmissionRow.method_hash == entry.method_hash,
+                        SubmissionRow.suite_name == entry.suite_name,
+                        SubmissionRow.suite_version == entry.suite_version,
+                    )
+                )
+                if existing is not None:
+                    raise self._duplicate_error(entry, existing)
+                row = SubmissionRow(**values)
+                row.aggregates = [
+                    TaskAggregateRow(task=task, metric=metric, **agg.model_dump())
+                    for task, per_metric in sorted(entry.task_aggregates.items())
+                    for metric, agg in per_metric.items()
+                ]
+                session.add(row)
+                session.flush()
+                return row.id
+
+        try:
+            return self._retrying(work)
+        except IntegrityError:  # a concurrent writer stored the same method first
+            raise self._duplicate_error(entry, None) from None
+
+    # -- reads -----------------------------------------------------------------------
+
+    @staticmethod
+    def _to_entry(row: SubmissionRow) -> LeaderboardEntry:
+        per_task: dict[str, dict[str, Aggregate]] = {}
+        for agg in row.aggregates:
+            per_task.setdefault(agg.task, {})[agg.metric] = Aggregate(
+                mean=agg.mean, iqm=agg.iqm, ci_low=agg.ci_low, ci_high=agg.ci_high
+            )
+        score = None
+        if row.score_mean is not None:
+            score = Aggregate(
+                mean=row.score_mean,
+                iqm=row.score_iqm if row.score_iqm is not None else row.score_mean,
+                ci_low=row.score_ci_low if row.score_ci_low is not None else row.score_mean,
+                ci_high=row.score_ci_high if row.score_ci_high is not None else row.score_mean,
+            )
+        created = row.created_utc
+        if created.tzinfo is None:  # SQLite keeps no zone; we always store UTC
+            created = created.replace(tzinfo=timezone.utc)
+        return LeaderboardEntry(
+            id=row.id,
+            created_utc=created,
+            name=row.name,
+            authors=row.authors,
+            url=row.url,
+            description=row.description,
+            track=row.track,
+            privileged=row.privileged,
+            deterministic=row.deterministic,
+            entry_point=row.entry_point,
+            method_hash=row.method_hash,
+            weights_sha256=row.weights_sha256,
+            suite_name=row.suite_name,
+            suite_version=row.suite_version,
+            suite_sha256=row.suite_sha256,
+            verified=row.verified,
+            trusted=row.trusted,
+            verification_seed=row.verification_seed,
+            verified_episodes=row.verified_episodes,
+            score=score,
+            delay_ms=row.delay_ms,
+            energy_j=row.energy_j,
+            jitter=row.jitter,
+            package_version=row.package_version,
+            git_commit=row.git_commit,
+            results_json=row.results_json,
+            task_aggregates=per_task,
+        )
+
+    def entries(self, suite_name: str | None = None) -> list[LeaderboardEntry]:
+        """All stored submissions (optionally of one suite), oldest first."""
+        query = select(SubmissionRow).order_by(SubmissionRow.id)
+        if suite_name is not None:
+            query = query.where(SubmissionRow.suite_name == suite_name)
+        with self._reading() as session:
+            return [self._to_entry(row) for row in session.scalars(query)]
+
+    def get(self, entry_id: int) -> LeaderboardEntry:
+        """One stored submission by ID; ``KeyError`` naming the ID when absent."""
+        with self._reading() as session:
+            row = session.get(SubmissionRow, entry_id)
+            if row is None:
+                raise KeyError(f"no submission #{entry_id} in {self.url}")
+            return self._to_entry(row)
+
+    def count(self) -> int:
+        """Number of stored submissions."""
+        with self._reading() as session:
+            return int(session.scalar(select(func.count()).select_from(SubmissionRow)) or 0)
+
+    def close(self) -> None:
+        """Release all connections."""
+        self._engine.dispose()
+
+    def __enter__(self) -> LeaderboardStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+__all__ = [
+    "ENV_VAR",
+    "MIGRATIONS",
+    "SCHEMA_VERSION",
+    "SHIPPED_REFERENCE_METHODS",
+    "LeaderboardEntry",
+    "LeaderboardStore",
+    "default_db_url",
+]

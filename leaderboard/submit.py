@@ -1,0 +1,218 @@
+"""Submitting to the leaderboard: validate → verify → store.
+
+:func:`submit` is what ``swarmloc submit`` calls. Nothing is written unless every step
+passes; any refusal raises a :class:`~swarmloc.leaderboard.errors.SubmissionError`
+subclass whose message says what was wrong, and leaves the store unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from swarmloc.bench.stats import aggregate, aggregate_across_tasks
+from swarmloc.leaderboard.errors import DuplicateSubmission, InvalidSubmission
+from swarmloc.leaderboard.schema import (
+    SizeLimits,
+    SubmissionMetadata,
+    SuiteLookup,
+    ValidatedSubmission,
+    make_submission,
+    validate_submission,
+)
+from swarmloc.leaderboard.store import (
+    SHIPPED_REFERENCE_METHODS,
+    LeaderboardEntry,
+    LeaderboardStore,
+)
+from swarmloc.leaderboard.verify import (
+    DEFAULT_RUNNER,
+    Tolerance,
+    VerificationReport,
+    VerifyLimits,
+    verify_results,
+)
+
+
+@dataclass(frozen=True)
+class SubmissionReceipt:
+    """What :func:`submit` stored.
+
+    Attributes:
+        id: The new submission's ID in the store.
+        entry: The stored entry.
+        report: The verification report, or ``None`` when trusted.
+        store_url: The store it went to (password hidden).
+    """
+
+    id: int
+    entry: LeaderboardEntry
+    report: VerificationReport | None
+    store_url: str
+
+    def describe(self) -> str:
+        """One paragraph for the terminal."""
+        score = self.entry.score
+        score_text = "n/a" if score is None else (
+            f"{score.mean:.3f} (IQM {score.iqm:.3f}, 95% CI [{score.ci_low:.3f}, {score.ci_high:.3f}])"
+        )
+        how = "trusted shipped method, not re-run" if self.report is None else self.report.describe()
+        return (
+            f"stored submission #{self.id} {self.entry.name!r} on suite "
+            f"{self.entry.suite_name} v{self.entry.suite_version} in {self.store_url}\n"
+            f"  normalized score {score_text}\n  verification: {how}"
+        )
+
+
+def _mean_metric(validated: ValidatedSubmission, metric: str) -> float | None:
+    values = [
+        getattr(e.metrics, metric)
+        for e in validated.results.episodes
+        if getattr(e.metrics, metric) is not None
+    ]
+    return sum(values) / len(values) if values else None
+
+
+def build_entry(
+    validated: ValidatedSubmission, report: VerificationReport | None, trusted: bool
+) -> LeaderboardEntry:
+    """The store record of a validated (and verified or trusted) submission.
+
+    Aggregates are recomputed from the episodes, never taken from the file.
+    """
+    results, meta = validated.results, validated.submission.metadata
+    per_task = {
+        task: {name: agg for name, agg in per_metric.items() if agg is not None}
+        for task, per_metric in aggregate(results.episodes).items()
+    }
+    return LeaderboardEntry(
+        created_utc=datetime.now(timezone.utc),
+        name=meta.name,
+        authors=meta.authors,
+        url=meta.url,
+        description=meta.description,
+        track=meta.track,
+        privileged=meta.privileged,
+        deterministic=results.method.deterministic,
+        entry_point=validated.submission.entry_point,
+        method_hash=validated.method_hash,
+        weights_sha256=validated.weights_sha256,
+        suite_name=results.suite.name,
+        suite_version=results.suite.version,
+        suite_sha256=results.suite.sha256,
+        verified=report is not None,
+        trusted=trusted,
+        verification_seed=None if report is None else report.sample_seed,
+        verified_episodes=0 if report is None else len(report.episodes),
+        score=aggregate_across_tasks(results.episodes, "normalized_score"),
+        delay_ms=_mean_metric(validated, "delay_ms"),
+        energy_j=_mean_metric(validated, "energy_j"),
+        jitter=_mean_metric(validated, "jitter"),
+        package_version=results.provenance.package_version,
+        git_commit=results.provenance.git_commit,
+        results_json=validated.results_text,
+        task_aggregates=per_task,
+    )
+
+
+def submit(
+    results_path: str | Path,
+    entry_point: str,
+    metadata: SubmissionMetadata | dict[str, Any],
+    weights: str | Path | None = None,
+    db_url: str | None = None,
+    trust: bool = False,
+    sample_frac: float = 0.1,
+    *,
+    min_episodes: int = 3,
+    sample_seed: int | None = None,
+    limits: VerifyLimits = VerifyLimits(),
+    tolerance: Tolerance | None = None,
+    size_limits: SizeLimits = SizeLimits(),
+    search_path: Sequence[str | Path] = (),
+    runner: str = DEFAULT_RUNNER,
+    runner_path: Sequence[str | Path] = (),
+    suite_lookup: SuiteLookup | None = None,
+    store: LeaderboardStore | None = None,
+) -> SubmissionReceipt:
+    """Validate, verify and store a submission.
+
+    Args:
+        results_path: Results file written by ``swarmloc evaluate``.
+        entry_point: The method (``package.module:factory``, ``path/file.py:factory`` or
+            a registered name); must match the results file.
+        metadata: Name, authors, URL, description, track, privileged (a
+            :class:`SubmissionMetadata` or a dict of its fields).
+        weights: Optional weights file; its SHA-256 must match the results.
+        db_url: Store URL (default: ``SWARMLOC_DB`` or the user data directory).
+        trust: Skip verification; only allowed for the shipped reference methods
+            (:data:`~swarmloc.leaderboard.store.SHIPPED_REFERENCE_METHODS`).
+        sample_frac: Fraction of episodes to re-run, in (0, 1].
+        min_episodes: Re-run at least this many episodes.
+        sample_seed: Sampler seed (fresh random one when None; recorded in the store).
+        limits: Wall-time and memory limits of the verification worker.
+        tolerance: Override the comparison tolerance.
+        size_limits: Largest results and weights files accepted.
+        search_path: Directories the method's modules are imported from.
+        runner: ``module:function`` the verification worker calls.
+        runner_path: Extra directories for the worker's ``PYTHONPATH`` (runner code).
+        suite_lookup: ``name -> suite`` (default ``swarmloc.bench.suites.get_suite``).
+        store: An open store (overrides ``db_url``).
+
+    Returns:
+        A receipt with the new ID, the stored entry and the verification report.
+
+    Raises:
+        InvalidSubmission: malformed metadata, files too large, results not matching
+            the suite, bad metrics, or ``trust`` for a non-shipped method.
+        VerificationFailed: the re-run crashed, timed out, ran out of memory, or
+            did not reproduce the submitted metrics.
+        DuplicateSubmission: the same method is already stored for this suite.
+    """
+    submission = make_submission(results_path, entry_point, metadata, weights, search_path)
+    if trust and entry_point not in SHIPPED_REFERENCE_METHODS:
+        raise InvalidSubmission(
+            f"trust=True skips verification only for the shipped reference methods "
+            f"{sorted(SHIPPED_REFERENCE_METHODS)}; {entry_point!r} is not one of them"
+        )
+    validated = validate_submission(submission, suite_lookup, size_limits)
+    own_store = store is None
+    active = store if store is not None else LeaderboardStore(db_url)
+    try:
+        existing = active.find_duplicate(
+            validated.method_hash, validated.results.suite.name, validated.results.suite.version
+        )
+        if existing is not None:  # cheap check before spending time on verification
+            raise DuplicateSubmission(
+                f"method {entry_point!r} (hash {validated.method_hash[:12]}…) is already on the "
+                f"leaderboard for suite {validated.results.suite.name!r} version "
+                f"{validated.results.suite.version!r} as submission #{existing}; change the "
+                f"method or its weights to submit again"
+            )
+        report = None
+        if not trust:
+            report = verify_results(
+                validated.results,
+                entry_point,
+                weights=submission.weights_path,
+                sample_frac=sample_frac,
+                min_episodes=min_episodes,
+                sample_seed=sample_seed,
+                limits=limits,
+                tolerance=tolerance,
+                runner=runner,
+                pythonpath=[*search_path, *runner_path],
+            )
+        entry = build_entry(validated, report, trusted=trust)
+        new_id = active.add(entry)
+        return SubmissionReceipt(id=new_id, entry=active.get(new_id), report=report,
+                                 store_url=active.url)
+    finally:
+        if own_store:
+            active.close()
+
+
+__all__ = ["SubmissionReceipt", "build_entry", "submit"]

@@ -1,0 +1,96 @@
+"""Shared fixtures of the leaderboard tests: a tiny suite and results-file builders."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import lb_fake_runner
+
+from swarmloc.bench.results import (
+    EpisodeMetrics,
+    MethodInfo,
+    SuiteInfo,
+    dumps_results,
+    make_results,
+    suite_sha256,
+    write_results,
+)
+from swarmloc.leaderboard.verify import VerifyLimits
+
+TESTS_DIR = Path(__file__).resolve().parent
+TASKS = ("swarmloc/Ideal-v0", "swarmloc/NLOS-v0")
+SEEDS = (1000, 1001, 1002)
+FAKE_RUNNER = "lb_fake_runner:run_episodes"
+TEST_LIMITS = VerifyLimits(wall_time_s=20.0, memory_bytes=512 * 1024**2)
+
+
+@dataclass(frozen=True)
+class FakeSuite:
+    """Satisfies the ``swarmloc.bench.suites.get_suite`` contract."""
+
+    name: str
+    version: str
+    sha256: str
+    episodes: list[tuple[str, int]]
+
+
+_EPISODES = [(t, s) for t in TASKS for s in SEEDS]
+SUITE = FakeSuite("tiny-test", "1", suite_sha256(_EPISODES), _EPISODES)
+
+
+def suite_lookup(name: str) -> FakeSuite:
+    """The injected suite registry."""
+    if name != SUITE.name:
+        raise KeyError(f"unknown suite {name!r}; known: [{SUITE.name!r}]")
+    return SUITE
+
+
+def make_results_file(
+    path: Path,
+    entry_point: str = "lb_fake_runner:good",
+    *,
+    name: str = "good method",
+    deterministic: bool = True,
+    privileged: bool = False,
+    track: str = "A",
+    suite_version: str = "1",
+    episodes: list[tuple[str, int]] | None = None,
+    edit: Callable[[dict[str, Any]], None] | None = None,
+) -> Path:
+    """Write a results file whose metrics the fake runner reproduces.
+
+    ``edit`` receives the raw JSON dict and may change it (to tamper, break bounds…).
+    """
+    keys = _EPISODES if episodes is None else episodes
+    results = make_results(
+        method=MethodInfo(name=name, entry_point=entry_point, privileged=privileged,
+                          track=track, deterministic=deterministic),
+        suite=SuiteInfo(name=SUITE.name, version=suite_version, sha256=SUITE.sha256),
+        episodes=[
+            {"task": t, "seed": s, "metrics": EpisodeMetrics.of(**lb_fake_runner.metrics_for(t, s))}
+            for t, s in keys
+        ],
+    )
+    if edit is None:
+        return write_results(path, results)
+    raw = json.loads(dumps_results(results))
+    edit(raw)
+    path.write_text(json.dumps(raw, indent=1))
+    return path
+
+
+def submit_options(db_url: str) -> dict[str, Any]:
+    """Keyword arguments that point ``submit`` at the fakes."""
+    return {
+        "db_url": db_url,
+        "suite_lookup": suite_lookup,
+        "runner": FAKE_RUNNER,
+        "runner_path": [TESTS_DIR],
+        "search_path": [TESTS_DIR],
+        "limits": TEST_LIMITS,
+        "sample_seed": 7,
+    }
