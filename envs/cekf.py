@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit, prange
 
 from .channels import ANCHOR, GPS, LANDMARK, PEER
+from .cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, VECTOR_ROW_FLOPS
 
 _MIN_RANGE = 1e-9
 
@@ -96,9 +97,9 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
         x0, hvec, c: scratch 6-, 3-, 6-vectors.
 
     Returns:
-        Number of scalar rows applied.
+        FLOPs of the step for this UAV (prediction + the rows applied, see ``cost.py``).
     """
-    rows = 0
+    flops = PREDICT_FLOPS
     for a in range(6):
         x0[a] = x[a]
     for l in range(kind.shape[0]):
@@ -126,7 +127,7 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
             # H enters as +hvec; _scalar_update uses hvec when col < 0
             _scalar_update(x, P, hvec, -1, y, r, c)
-            rows += 1
+            flops += RANGE_ROW_FLOPS
         else:
             for d in range(3):
                 if ch == GPS:
@@ -138,9 +139,9 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
                     qd = landmarks[j, d] if ch == LANDMARK else prior_pos[j, d]
                     y = -(z[l, d] - qd + x[d])  # sign folded: update along +e_d with −y
                     _scalar_update(x, P, hvec, d, y, r, c)
-                rows += 1
+                flops += VECTOR_ROW_FLOPS
         active[l] = True
-    return rows
+    return flops
 
 
 @njit(cache=True, parallel=True)
@@ -157,11 +158,11 @@ def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
 
 @njit(cache=True, parallel=True)
 def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
-                alpha_th, alpha_min, active, rows):
+                alpha_th, alpha_min, active, flops):
     """Trust-weighted joint update of every UAV of every episode (in place).
 
     Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
-    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, rows ``(B, N)``.
+    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output.
     """
     n_b, n = x.shape[0], x.shape[1]
     for b in prange(n_b):
@@ -169,7 +170,7 @@ def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, pri
         hvec = np.empty(3)
         c = np.empty(6)
         for i in range(n):
-            rows[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
+            flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
                                     r0[i], anchors, landmarks, prior_pos[b], alpha_th, alpha_min,
                                     active[b, i], x0, hvec, c)
 

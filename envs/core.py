@@ -16,8 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cekf
-from .channels import KIND_DIM
-from .cost import filter_flops
 from .specs import TaskSpec
 from .world import World
 
@@ -77,8 +75,6 @@ class LinkTrustCore:
         self.P = np.zeros((n_b, n, 6, 6))
         self._prior_pos = np.zeros((n_b, n, 3))
         self._r0 = np.ascontiguousarray(self.layout.r0)
-        self._dim = KIND_DIM[self.layout.kind]  # (N, L) rows per channel
-        self._is_range = self._dim == 1
         z = lambda *shape, dt=np.float64: np.zeros(shape, dtype=dt)  # noqa: E731
         self._out = CoreStep(
             resid=z(n_b, n, n_l), pred=z(n_b, n, n_l), nis=z(n_b, n, n_l), prev_trust=np.ones((n_b, n, n_l)),
@@ -87,8 +83,7 @@ class LinkTrustCore:
             active=z(n_b, n, n_l, dt=np.bool_), flops=z(n_b, n), steps=z(n_b, dt=np.int64),
             done=z(n_b, dt=np.bool_),
         )
-        self._prev_imu = z(n_b, n, 3)
-        self._rows = z(n_b, n, dt=np.int64)
+        self._flops = z(n_b, n)
         self._z = z(n_b, n, n_l, 3)
         self._valid = z(n_b, n, n_l, dt=np.bool_)
 
@@ -184,16 +179,14 @@ class LinkTrustCore:
             raise RuntimeError("every episode is done; call reset() first")
         cekf.cekf_update(self.x, self.P, self._z, self._valid, trust, lay.kind, lay.target, self._r0,
                          w.anchors, w.landmarks, self._prior_pos, s.filter.alpha_th, s.filter.alpha_min,
-                         o.active, self._rows)
-        live = ~o.done
+                         o.active, self._flops)
+        live = slice(None) if not o.done.any() else ~o.done
         o.estimate[live] = self.x[live, :, :3]
         o.truth[live] = w.buffers.pos[live]
         o.label[live] = w.buffers.label[live]
         o.prev_trust[live] = o.applied[live]
         o.applied[live] = trust[live]
-        range_rows = (o.active & self._is_range).sum(axis=-1)
-        vector_rows = (o.active * self._dim * ~self._is_range).sum(axis=-1)
-        o.flops[live] = filter_flops(range_rows, vector_rows)[live]
+        o.flops[live] = self._flops[live]
         o.steps[live] += 1
         o.done[:] = o.steps >= s.n_steps
         if o.done.all():
