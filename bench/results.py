@@ -396,6 +396,26 @@ def _describe_validation_error(err: ValidationError, limit: int = 8) -> str:
     return "\n".join(lines)
 
 
+def _ends_inside_value(text: str) -> bool:
+    """True when the text stops inside a string or with brackets left open."""
+    depth, in_string, escaped = 0, False, False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "{[":
+            depth += 1
+        elif char in "}]":
+            depth -= 1
+    return in_string or depth > 0
+
+
 def parse_results(text: str | bytes, source: str = "<results>") -> Results:
     """Parse and validate results JSON text.
 
@@ -419,11 +439,11 @@ def parse_results(text: str | bytes, source: str = "<results>") -> Results:
     try:
         raw = json.loads(text)
     except json.JSONDecodeError as err:
-        truncated = err.pos >= len(text.rstrip())
+        truncated = err.pos >= len(text.rstrip()) or _ends_inside_value(text)
         problem = "truncated (the JSON ends early)" if truncated else "corrupted (invalid JSON)"
         raise ResultsFileError(
-            f"results file {source} is {problem}: {err.msg} at line {err.lineno}, "
-            f"column {err.colno}"
+            f"results file {source} is {problem}: {err.msg} (line {err.lineno}, "
+            f"column {err.colno})"
         ) from None
     if not isinstance(raw, dict):
         raise ResultsFileError(

@@ -442,9 +442,7 @@ def make_submission(
             entry_point=entry_point,
             weights_path=None if weights is None else Path(weights),
             search_path=tuple(Path(p) for p in search_path),
-            metadata=metadata
-            if isinstance(metadata, SubmissionMetadata)
-            else SubmissionMetadata.model_validate(metadata),
+            metadata=metadata,  # type: ignore[arg-type]  # a dict is validated as nested
         )
     except ValidationError as err:
         lines = []

@@ -6,12 +6,14 @@ function of (task, seed). The method's factory name selects a behaviour:
 * ``...:good*``  — return the deterministic metrics;
 * ``...:crash``  — raise inside the method;
 * ``...:sleep``  — sleep far past any test time limit;
-* ``...:oom``    — allocate far past any test memory limit.
+* ``...:oom``    — allocate far past any test memory limit;
+* ``...:envcheck`` — fail unless the worker's environment is clean (no store URL).
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 
 
@@ -46,6 +48,10 @@ def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | No
         raise RuntimeError("simulated crash inside the method")
     if behaviour == "sleep":
         time.sleep(120)
+    if behaviour == "envcheck":
+        leaked = sorted(k for k in os.environ if k.startswith("SWARMLOC") or k == "LEAK_CANARY")
+        if leaked:
+            raise RuntimeError(f"the worker inherited {leaked}")
     if behaviour == "oom":
         hog = bytearray(8 * 1024**3)
         return [{"task": "never", "seed": len(hog), "metrics": {}}]

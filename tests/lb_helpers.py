@@ -59,20 +59,29 @@ def make_results_file(
     track: str = "A",
     suite_version: str = "1",
     episodes: list[tuple[str, int]] | None = None,
+    metrics_edit: Callable[[str, int, dict[str, Any]], None] | None = None,
     edit: Callable[[dict[str, Any]], None] | None = None,
 ) -> Path:
     """Write a results file whose metrics the fake runner reproduces.
 
-    ``edit`` receives the raw JSON dict and may change it (to tamper, break bounds…).
+    ``metrics_edit(task, seed, metrics)`` changes metrics before the aggregates are
+    computed (a consistent file with tampered episodes); ``edit`` receives the final raw
+    JSON dict and may change anything (aggregates included).
     """
     keys = _EPISODES if episodes is None else episodes
+
+    def metrics(task: str, seed: int) -> EpisodeMetrics:
+        values = lb_fake_runner.metrics_for(task, seed)
+        if metrics_edit is not None:
+            metrics_edit(task, seed, values)
+        return EpisodeMetrics.of(**values)
+
     results = make_results(
         method=MethodInfo(name=name, entry_point=entry_point, privileged=privileged,
                           track=track, deterministic=deterministic),
         suite=SuiteInfo(name=SUITE.name, version=suite_version, sha256=SUITE.sha256),
         episodes=[
-            {"task": t, "seed": s, "metrics": EpisodeMetrics.of(**lb_fake_runner.metrics_for(t, s))}
-            for t, s in keys
+            {"task": t, "seed": s, "metrics": metrics(t, s)} for t, s in keys
         ],
     )
     if edit is None:

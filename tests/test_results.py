@@ -68,12 +68,15 @@ def test_write_is_atomic_on_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
 
 
-def test_truncated_file_is_rejected_clearly(tmp_path: Path) -> None:
+@pytest.mark.parametrize("keep", [0.5, 0.9, 0.999])
+def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None:
     path = R.write_results(tmp_path / "r.json", _results())
-    text = path.read_text()
-    path.write_text(text[: len(text) // 2])
-    with pytest.raises(R.ResultsFileError, match=r"r\.json is truncated"):
-        R.load_results(path)
+    text = path.read_text().rstrip()
+    start = int(len(text) * keep)
+    for cut in range(start, min(start + 40, len(text))):
+        path.write_text(text[:cut])
+        with pytest.raises(R.ResultsFileError, match=r"r\.json is truncated \(the JSON ends early\)"):
+            R.load_results(path)
 
 
 @pytest.mark.parametrize(
@@ -81,7 +84,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path) -> None:
     [
         (b"", "is empty"),
         (b"\xff\xfe garbage", "not UTF-8"),
-        (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* line 1, column 22"),
+        (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
         (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema_version 1"),
     ],

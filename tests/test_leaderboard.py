@@ -1,0 +1,535 @@
+"""Leaderboard: validation, sandboxed verification, the store, and the views.
+
+A tiny suite (2 tasks × 3 seeds) is injected instead of ``swarmloc.bench.suites``, and
+verification calls ``tests/lb_fake_runner.py`` instead of the real runner.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import subprocess
+import sys
+import textwrap
+import types
+from pathlib import Path
+from typing import Any
+
+import lb_helpers as H
+import pytest
+from rich.console import Console
+from sqlalchemy import event
+from sqlalchemy.orm import Session
+
+from swarmloc.leaderboard import store as store_module
+from swarmloc.leaderboard import views
+from swarmloc.leaderboard.cli_commands import (
+    LeaderboardExport,
+    LeaderboardHtml,
+    LeaderboardShow,
+    SubmitCommand,
+    run_leaderboard,
+    run_submit,
+)
+from swarmloc.leaderboard.errors import (
+    DuplicateSubmission,
+    InvalidSubmission,
+    StoreError,
+    SubmissionError,
+    VerificationFailed,
+)
+from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.submit import submit
+from swarmloc.leaderboard.verify import (
+    Tolerance,
+    VerifyLimits,
+    sample_episodes,
+    worker_environment,
+)
+
+META = {"name": "good method", "authors": "A. Author", "track": "A"}
+
+
+def _submit(path: Path, entry_point: str, db_url: str, meta: dict[str, Any] | None = None,
+            **overrides: Any):
+    return submit(path, entry_point, meta or META, **(H.submit_options(db_url) | overrides))
+
+
+def _snapshot(db_url: str) -> tuple[Any, ...]:
+    with LeaderboardStore(db_url) as store:
+        return tuple(
+            (e.id, e.name, e.method_hash, json.dumps(
+                {t: {m: a.model_dump() for m, a in per.items()} for t, per in e.task_aggregates.items()}
+            ))
+            for e in store.entries()
+        )
+
+
+@pytest.fixture
+def db_url(tmp_path: Path) -> str:
+    """A store that already holds one accepted submission."""
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    _submit(H.make_results_file(tmp_path / "seed.json", "lb_fake_runner:good_seed"),
+            "lb_fake_runner:good_seed", url, {"name": "seed method", "track": "A"})
+    return url
+
+
+# -- acceptance and ranking ------------------------------------------------------------
+
+
+def test_valid_submission_is_accepted_and_ranked(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    plain = H.make_results_file(tmp_path / "plain.json", "lb_fake_runner:good_plain")
+    receipt = _submit(plain, "lb_fake_runner:good_plain", url, {"name": "plain", "track": "A"})
+    assert receipt.report is not None and receipt.report.ok
+    assert receipt.report.sample_seed == 7 and len(receipt.report.episodes) == 3
+    assert receipt.entry.verified and not receipt.entry.trusted
+    assert "stored submission #1 'plain'" in receipt.describe()
+
+    worse = H.make_results_file(tmp_path / "worse.json", "lb_fake_runner:good_worse")
+    oracle = H.make_results_file(tmp_path / "oracle.json", "lb_fake_runner:good_oracle",
+                                 privileged=True)
+    _submit(worse, "lb_fake_runner:good_worse", url, {"name": "worse", "track": "A"})
+    _submit(oracle, "lb_fake_runner:good_oracle", url,
+            {"name": "oracle", "track": "A", "privileged": True})
+    with LeaderboardStore(url) as store:
+        entries = store.entries()
+        assert [e.name for e in entries] == ["plain", "worse", "oracle"]
+        ranked, privileged = views.split_ranked(entries)
+        assert [e.name for e in ranked] == ["plain", "worse"]  # equal scores: older first
+        assert [e.name for e in privileged] == ["oracle"]
+        entry = entries[0]
+        assert entry.score is not None
+        assert entry.score.ci_low <= entry.score.mean <= entry.score.ci_high
+        assert sorted(entry.task_aggregates) == list(H.TASKS)
+        assert "fault_rmse" not in entry.task_aggregates[H.TASKS[0]]  # undefined metric
+        assert entry.results_json == plain.read_text()
+        assert entry.verification_seed == 7
+
+
+def test_ranking_orders_by_mean_normalized_score(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    with LeaderboardStore(url) as store:
+        for name, offset in [("low", -0.3), ("high", 0.4), ("mid", 0.0)]:
+            path = H.make_results_file(
+                tmp_path / f"{name}.json", f"lb_fake_runner:good_{name}",
+                metrics_edit=lambda t, s, m, o=offset: m.update(
+                    normalized_score=m["normalized_score"] + o),
+            )
+            # Verification re-runs the unshifted metrics, so compare with a loose tolerance.
+            submit(path, f"lb_fake_runner:good_{name}", {"name": name, "track": "A"},
+                   **(H.submit_options(url) | {"tolerance": Tolerance(abs=1.0)}), store=store)
+        ranked, _ = views.split_ranked(store.entries())
+        assert [e.name for e in ranked] == ["high", "mid", "low"]
+
+
+# -- rejections: clear message, store unchanged -------------------------------------------
+
+
+def _nan_rmse(raw: dict) -> None:
+    raw["episodes"][0]["metrics"]["rmse"] = math.nan
+
+
+def _inf_delay(raw: dict) -> None:
+    raw["episodes"][4]["metrics"]["delay_ms"] = math.inf
+
+
+def _negative_rmse(raw: dict) -> None:
+    raw["episodes"][1]["metrics"]["rmse"] = -0.25
+
+
+def _edited_aggregate(raw: dict) -> None:
+    raw["aggregates"][H.TASKS[1]]["rmse"]["mean"] = 0.01
+
+
+def _oversize(path: Path) -> None:
+    text = path.read_text()
+    path.write_text(text + " " * (16 * 1024 * 1024))
+
+
+REJECTIONS: dict[str, tuple[dict[str, Any], dict[str, Any], type[SubmissionError], str]] = {
+    # case: (results-file options, submit options, error type, message regex)
+    "missing episodes": (
+        {"episodes": [(t, s) for t in H.TASKS for s in H.SEEDS][:4]}, {}, InvalidSubmission,
+        r"2 episode\(s\) of suite 'tiny-test' are missing: \('swarmloc/NLOS-v0', 1001\), "
+        r"\('swarmloc/NLOS-v0', 1002\)",
+    ),
+    "nan metric": (
+        {"edit": _nan_rmse}, {}, InvalidSubmission,
+        r"episode \('swarmloc/Ideal-v0', seed 1000\) metric 'rmse' is nan; metrics must be finite",
+    ),
+    "inf metric": (
+        {"edit": _inf_delay}, {}, InvalidSubmission,
+        r"metric 'delay_ms' is inf; metrics must be finite",
+    ),
+    "negative rmse": (
+        {"edit": _negative_rmse}, {}, InvalidSubmission,
+        r"seed 1001\) metric 'rmse' is -0.25; allowed range is \[0.0, inf\]",
+    ),
+    "hand-edited aggregate": (
+        {"edit": _edited_aggregate}, {}, InvalidSubmission,
+        r"aggregates\['swarmloc/NLOS-v0'\]\['rmse'\].mean is 0.01, but the episodes give",
+    ),
+    "tampered metric": (
+        {"metrics_edit": lambda t, s, m: m.update(rmse=m["rmse"] * 0.9)
+         if (t, s) == (H.TASKS[1], 1002) else None},
+        {"sample_frac": 1.0}, VerificationFailed,
+        r"1 metric\(s\) in 1 episode\(s\) differ:\n  - \('swarmloc/NLOS-v0', seed 1002\) rmse: "
+        r"submitted [0-9.]+, re-run gave [0-9.]+",
+    ),
+    "wrong suite version": (
+        {"suite_version": "0"}, {}, InvalidSubmission,
+        r"suite 'tiny-test' version '0' is not the current version '1'",
+    ),
+    "method crashes": (
+        {"entry_point": "lb_fake_runner:crash"}, {}, VerificationFailed,
+        r"method 'lb_fake_runner:crash' crashed during verification: "
+        r"RuntimeError: simulated crash inside the method",
+    ),
+    "method exceeds time limit": (
+        {"entry_point": "lb_fake_runner:sleep"},
+        {"limits": VerifyLimits(wall_time_s=1.5, memory_bytes=512 * 1024**2)},
+        VerificationFailed,
+        r"method 'lb_fake_runner:sleep' exceeded the wall-time limit of 1.5 s while re-running "
+        r"3 episode\(s\); the worker was killed",
+    ),
+    "method exceeds memory limit": (
+        {"entry_point": "lb_fake_runner:oom"}, {}, VerificationFailed,
+        r"method 'lb_fake_runner:oom' exceeded the memory limit of 512 MiB",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(REJECTIONS))
+def test_bad_submission_is_rejected_and_store_unchanged(
+    case: str, db_url: str, tmp_path: Path
+) -> None:
+    file_options, submit_overrides, error, message = REJECTIONS[case]
+    entry_point = file_options.get("entry_point", "lb_fake_runner:good_candidate")
+    path = H.make_results_file(tmp_path / "candidate.json", **(file_options | {"entry_point": entry_point}))
+    before = _snapshot(db_url)
+    with pytest.raises(error, match=message):
+        _submit(path, entry_point, db_url, **submit_overrides)
+    assert _snapshot(db_url) == before
+
+
+def test_oversized_results_file_is_rejected(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "big.json", "lb_fake_runner:good_big")
+    _oversize(path)  # still valid JSON: only the size check can refuse it
+    before = _snapshot(db_url)
+    with pytest.raises(InvalidSubmission, match=r"big\.json is \d+ bytes; the limit is 16777216 bytes"):
+        _submit(path, "lb_fake_runner:good_big", db_url)
+    assert _snapshot(db_url) == before
+
+
+def test_truncated_results_file_is_rejected(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "cut.json", "lb_fake_runner:good_cut")
+    path.write_text(path.read_text()[:-200])
+    before = _snapshot(db_url)
+    with pytest.raises(InvalidSubmission, match=r"cut\.json is truncated"):
+        _submit(path, "lb_fake_runner:good_cut", db_url)
+    assert _snapshot(db_url) == before
+
+
+@pytest.mark.parametrize(
+    ("meta", "message"),
+    [
+        ({"name": "x" * 65, "track": "A"}, r"metadata.name: String should have at most 64 characters"),
+        ({"name": "bad\x1bname", "track": "A"}, r"control character '\\x1b' \(U\+001B\)"),
+        ({"name": "ok", "track": "C"}, r"metadata.track: Input should be 'A' or 'B'"),
+        ({"name": "ok", "track": "A", "url": "javascript:alert(1)"}, r"must start with http"),
+        ({"name": "ok", "track": "A", "description": "d" * 2001}, r"at most 2000 characters"),
+    ],
+)
+def test_bad_metadata_is_rejected(meta: dict, message: str, db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "m.json", "lb_fake_runner:good_meta")
+    with pytest.raises(InvalidSubmission, match=message):
+        _submit(path, "lb_fake_runner:good_meta", db_url, meta)
+
+
+def test_mismatched_claims_are_rejected(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "m.json", "lb_fake_runner:good_claims")
+    with pytest.raises(InvalidSubmission) as info:
+        _submit(path, "lb_fake_runner:good_other", db_url,
+                {"name": "x", "track": "B", "privileged": True}, weights=path)
+    text = str(info.value)
+    assert "entry point 'lb_fake_runner:good_other' differs from the results file's" in text
+    assert "track 'B' differs from the results' 'A'" in text
+    assert "privileged=True differs from the results' privileged=False" in text
+    assert "weights file SHA-256" in text
+
+
+def test_duplicate_submission_is_rejected(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "again.json", "lb_fake_runner:good_seed")
+    before = _snapshot(db_url)
+    with pytest.raises(DuplicateSubmission, match=r"already on the leaderboard for suite "
+                                                  r"'tiny-test' version '1' as submission #1"):
+        _submit(path, "lb_fake_runner:good_seed", db_url, {"name": "renamed", "track": "A"})
+    assert _snapshot(db_url) == before
+
+
+def test_trust_is_only_for_shipped_methods(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "t.json", "lb_fake_runner:good_trust")
+    with pytest.raises(InvalidSubmission, match=r"'lb_fake_runner:good_trust' is not one of them"):
+        _submit(path, "lb_fake_runner:good_trust", db_url, trust=True)
+    shipped = sorted(store_module.SHIPPED_REFERENCE_METHODS)[0]
+    path = H.make_results_file(tmp_path / "s.json", shipped)
+    receipt = _submit(path, shipped, db_url, {"name": "shipped", "track": "A"}, trust=True)
+    assert receipt.report is None and receipt.entry.trusted and not receipt.entry.verified
+
+
+def test_nondeterministic_methods_get_a_tolerance(db_url: str, tmp_path: Path) -> None:
+    def nudge(t: str, s: int, m: dict) -> None:
+        m["rmse"] *= 1 + 1e-5
+
+    strict = H.make_results_file(tmp_path / "d.json", "lb_fake_runner:good_det", metrics_edit=nudge)
+    with pytest.raises(VerificationFailed, match="compared with exact equality"):
+        _submit(strict, "lb_fake_runner:good_det", db_url, sample_frac=1.0)
+    loose = H.make_results_file(tmp_path / "n.json", "lb_fake_runner:good_nondet",
+                                metrics_edit=nudge, deterministic=False)
+    receipt = _submit(loose, "lb_fake_runner:good_nondet", db_url, sample_frac=1.0)
+    assert receipt.report is not None and "relative 0.001" in receipt.report.describe()
+
+
+# -- verification sandbox ------------------------------------------------------------
+
+
+def test_sampler_is_seeded_and_sized() -> None:
+    pool = [(f"t{i % 4}", i) for i in range(95)]
+    a = sample_episodes(pool, 0.1, 3, seed=11)
+    assert len(a) == 10 and a == sample_episodes(list(reversed(pool)), 0.1, 3, seed=11)
+    assert a != sample_episodes(pool, 0.1, 3, seed=12)
+    assert len(sample_episodes(pool[:6], 0.1, 3, seed=0)) == 3
+    assert len(sample_episodes(pool[:2], 0.1, 3, seed=0)) == 2
+    with pytest.raises(ValueError, match=r"sample fraction must be in \(0, 1\], got 0"):
+        sample_episodes(pool, 0.0)
+
+
+def test_worker_gets_a_clean_environment(
+    db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SWARMLOC_DB", db_url)
+    monkeypatch.setenv("LEAK_CANARY", "1")
+    env = worker_environment(tmp_path, ["/x"])
+    assert "SWARMLOC_DB" not in env and "LEAK_CANARY" not in env
+    assert env["HOME"] == str(tmp_path) and env["PYTHONPATH"] == "/x"
+    path = H.make_results_file(tmp_path / "e.json", "lb_fake_runner:envcheck")
+    receipt = _submit(path, "lb_fake_runner:envcheck", db_url, {"name": "env", "track": "A"})
+    assert receipt.report is not None and receipt.report.ok
+
+
+def test_file_entry_points_run_from_their_directory(db_url: str, tmp_path: Path) -> None:
+    method_file = tmp_path / "methods" / "my_method.py"
+    method_file.parent.mkdir()
+    method_file.write_text("def good_file():\n    return None\n")
+    entry_point = f"{method_file}:good_file"
+    path = H.make_results_file(tmp_path / "f.json", entry_point)
+    receipt = _submit(path, entry_point, db_url, {"name": "file", "track": "A"})
+    assert receipt.entry.entry_point == entry_point
+    # The method hash covers the source: editing the file makes a new method.
+    method_file.write_text("def good_file():\n    return 1\n")
+    receipt2 = _submit(path, entry_point, db_url, {"name": "file v2", "track": "A"})
+    assert receipt2.entry.method_hash != receipt.entry.method_hash
+
+
+# -- the store -----------------------------------------------------------------------
+
+
+def test_sql_metacharacters_are_stored_verbatim(db_url: str, tmp_path: Path) -> None:
+    name = "Robert'); DROP TABLE submissions;-- \" % _ \\"
+    path = H.make_results_file(tmp_path / "sql.json", "lb_fake_runner:good_sql")
+    receipt = _submit(path, "lb_fake_runner:good_sql", db_url,
+                      {"name": name, "track": "A", "authors": "O'Brien; --"})
+    with LeaderboardStore(db_url) as store:
+        assert store.get(receipt.id).name == name
+        assert store.get(receipt.id).authors == "O'Brien; --"
+        assert store.count() == 2
+
+
+def test_a_write_that_fails_midway_leaves_the_store_unchanged(db_url: str, tmp_path: Path) -> None:
+    path = H.make_results_file(tmp_path / "mid.json", "lb_fake_runner:good_mid")
+    before = _snapshot(db_url)
+
+    def fail_after_flush(session: Session, _context: Any) -> None:
+        raise RuntimeError("disk unplugged after the rows were written")
+
+    event.listen(Session, "after_flush", fail_after_flush)
+    try:
+        with pytest.raises(RuntimeError, match="disk unplugged"):
+            _submit(path, "lb_fake_runner:good_mid", db_url)
+    finally:
+        event.remove(Session, "after_flush", fail_after_flush)
+    assert _snapshot(db_url) == before
+
+
+CONCURRENT_SUBMIT = textwrap.dedent(
+    """
+    import sys, time
+    sys.path.insert(0, {tests!r})
+    import lb_helpers as H
+    from swarmloc.leaderboard.store import LeaderboardStore
+    from swarmloc.leaderboard.submit import submit
+    url, path, entry, name, start = sys.argv[1:6]
+    time.sleep(max(0.0, float(start) - time.time()))
+    submit(path, entry, {{"name": name, "track": "A"}}, **H.submit_options(url))
+    # Then hammer the store layer directly so the two writers really overlap.
+    with LeaderboardStore(url) as store:
+        base = next(e for e in store.entries() if e.name == name)
+        for i in range(15):
+            store.add(base.__class__(**{{**base.__dict__, "method_hash": f"{{name}}-{{i:03d}}".ljust(64, "0"),
+                                         "id": None}}))
+    print("ok", name)
+    """
+)
+
+
+def test_concurrent_submits_from_two_processes_both_land(db_url: str, tmp_path: Path) -> None:
+    import time
+
+    start = time.time() + 2.0
+    procs = []
+    for name in ("alpha", "beta"):
+        entry = f"lb_fake_runner:good_{name}"
+        path = H.make_results_file(tmp_path / f"{name}.json", entry)
+        procs.append(subprocess.Popen(
+            [sys.executable, "-c", CONCURRENT_SUBMIT.format(tests=str(H.TESTS_DIR)),
+             db_url, str(path), entry, name, str(start)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        ))
+    outputs = [p.communicate(timeout=60) for p in procs]
+    for proc, (out, err) in zip(procs, outputs):
+        assert proc.returncode == 0, err
+    with LeaderboardStore(db_url) as store:
+        names = [e.name for e in store.entries()]
+    assert names.count("alpha") == 16 and names.count("beta") == 16
+    assert len(names) == 33
+
+
+def test_store_location_env_var_and_default(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SWARMLOC_DB", f"sqlite:///{tmp_path / 'env.db'}")
+    with LeaderboardStore() as store:
+        assert store.url.endswith("env.db")
+    assert (tmp_path / "env.db").is_file()
+    monkeypatch.delenv("SWARMLOC_DB")
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    assert store_module.default_db_url() == f"sqlite:///{tmp_path / 'xdg' / 'swarmloc' / 'leaderboard.db'}"
+    with pytest.raises(StoreError, match=r"invalid database URL 'not a url'"):
+        LeaderboardStore("not a url")
+
+
+def test_schema_version_and_migration_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    url = f"sqlite:///{tmp_path / 'm.db'}"
+    with LeaderboardStore(url) as store:
+        assert store.schema_version() == store_module.SCHEMA_VERSION == 1
+    applied = []
+
+    def to_v2(conn: Any) -> None:
+        conn.exec_driver_sql("CREATE TABLE probe_v2 (id INTEGER PRIMARY KEY)")
+        applied.append(2)
+
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
+    monkeypatch.setitem(store_module.MIGRATIONS, 1, to_v2)
+    with LeaderboardStore(url) as store:
+        assert store.schema_version() == 2 and applied == [2]
+    with LeaderboardStore(url) as store:  # already upgraded: nothing re-applied
+        assert applied == [2]
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 1)
+    with pytest.raises(StoreError, match=r"schema version 2; this swarmloc supports up to 1"):
+        LeaderboardStore(url)
+
+
+def test_schema_is_portable_to_postgresql() -> None:
+    from sqlalchemy.dialects import postgresql
+    from sqlalchemy.schema import CreateTable
+
+    for table in store_module.Base.metadata.sorted_tables:
+        ddl = str(CreateTable(table).compile(dialect=postgresql.dialect()))
+        assert "CREATE TABLE" in ddl
+    ddl = str(CreateTable(store_module.SubmissionRow.__table__).compile(dialect=postgresql.dialect()))
+    assert "verification_seed BIGINT" in ddl and "created_utc TIMESTAMP WITH TIME ZONE" in ddl
+
+
+# -- views ---------------------------------------------------------------------------
+
+
+def test_script_in_name_is_escaped_in_html(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.plots", None)  # no plot function yet
+    evil = '<script>alert("x")</script>'
+    path = H.make_results_file(tmp_path / "x.json", "lb_fake_runner:good_xss")
+    receipt = _submit(path, "lb_fake_runner:good_xss", db_url, {
+        "name": evil, "track": "A", "authors": "<img src=x onerror=alert(1)>",
+        "description": "<b>bold</b>\nline 2", "url": "https://example.org/?a=1&b=2",
+    })
+    site = tmp_path / "site"
+    index = views.render_html(LeaderboardStore(db_url), site)
+    page = (site / "methods" / f"{receipt.id}.html").read_text()
+    for text in (index.read_text(), page):
+        assert evil not in text and "<img src=x" not in text
+        assert "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt;" in text
+        assert text.count("<script") == 1  # only our own sorter
+        assert "://" not in text.replace("https://example.org/?a=1&amp;b=2", "")  # nothing external
+    assert "<b>bold</b>" not in page and "&lt;b&gt;bold&lt;/b&gt;" in page
+    assert "<img" not in page  # no plot function: the plot slot is omitted
+    assert (site / "results" / f"{receipt.id}.json").read_text() == path.read_text()
+    assert f'href="../results/{receipt.id}.json" download' in page
+
+
+def test_method_page_embeds_plots_when_bench_provides_them(
+    db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls = []
+
+    def plot_results(results_path: Path, out_dir: Path) -> list[Path]:
+        calls.append(Path(results_path))
+        target = Path(out_dir) / "rmse by task.png"
+        target.write_bytes(b"\x89PNG\r\n\x1a\n")
+        return [target]
+
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.plots",
+                        types.SimpleNamespace(plot_results=plot_results))
+    site = tmp_path / "site"
+    views.render_html(LeaderboardStore(db_url), site)
+    page = (site / "methods" / "1.html").read_text()
+    assert calls == [site / "results" / "1.json"]
+    assert '<img src="../plots/1/rmse%20by%20task.png" alt="rmse by task"' in page
+    assert (site / "plots" / "1" / "rmse by task.png").is_file()
+
+
+def test_terminal_view_and_exports(db_url: str, tmp_path: Path) -> None:
+    oracle = H.make_results_file(tmp_path / "o.json", "lb_fake_runner:good_o", privileged=True)
+    _submit(oracle, "lb_fake_runner:good_o", db_url,
+            {"name": "=HYPERLINK(\"x\") [bold]oracle[/bold]", "track": "A", "privileged": True})
+    console = Console(record=True, width=250, file=io.StringIO())
+    with LeaderboardStore(db_url) as store:
+        views.print_leaderboard(store, console=console)
+        text = console.export_text()
+        assert "seed method" in text and "[bold]oracle[/bold]" in text
+        assert text.index("Privileged methods") < text.index("[bold]oracle")
+        for header in ("Score", "IQM", "95% CI", "RMSE Ideal-v0 [m]", "Delay [ms]", "Energy [J]", "Jitter"):
+            assert header in text
+        csv_text = views.export(store, "csv")
+        rows = csv_text.splitlines()
+        assert rows[0].startswith("id,suite,suite_version,rank,name,")
+        assert "rmse[swarmloc/Ideal-v0]" in rows[0]
+        assert len(rows) == 3 and rows[1].startswith("1,tiny-test,1,1,seed method")
+        assert "'=HYPERLINK" in rows[2]  # formula neutralized
+        data = json.loads(views.export(store, "json"))
+        assert [row["rank"] for row in data] == [1, None]
+        assert data[1]["name"].startswith("=HYPERLINK")  # JSON keeps the exact text
+        assert set(data[0]["task_aggregates"][H.TASKS[0]]["rmse"]) == {"mean", "iqm", "ci_low", "ci_high"}
+        with pytest.raises(ValueError, match="unknown export format 'xml'"):
+            views.export(store, "xml")  # type: ignore[arg-type]
+
+
+def test_cli_commands(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    console = Console(record=True, width=250, file=io.StringIO())
+    assert run_leaderboard(LeaderboardShow(db_url=db_url), console) == 0
+    assert "seed method" in console.export_text()
+    assert run_leaderboard(LeaderboardHtml(out=tmp_path / "site", db_url=db_url), console) == 0
+    assert (tmp_path / "site" / "index.html").is_file()
+    assert run_leaderboard(LeaderboardExport(format="json", db_url=db_url), console) == 0
+    assert json.loads(capsys.readouterr().out)[0]["name"] == "seed method"
+    refused = run_submit(SubmitCommand(results=tmp_path / "missing.json", entry_point="pkg.mod:make",
+                                       name="x", track="A", db_url=db_url), console)
+    assert refused == 1 and "missing.json does not exist" in console.export_text()

@@ -1,0 +1,99 @@
+"""The generated leaderboard site in headless Chromium: it loads, lists, and sorts.
+
+Needs Debian's Chromium at /usr/bin/chromium (``apt-get install chromium``; ``.ci/run``
+installs it) and the Playwright Python client. A screenshot goes to ``test-artifacts/``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import lb_helpers as H
+import pytest
+
+from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.submit import submit
+from swarmloc.leaderboard.verify import Tolerance
+from swarmloc.leaderboard.views import render_html
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+]
+ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+
+
+def _build_site(tmp_path: Path) -> Path:
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    methods = [("mid", 0.0, False), ("high", 0.4, False), ("low", -0.3, False),
+               ("oracle", 0.6, True)]
+    with LeaderboardStore(url) as store:
+        for name, offset, privileged in methods:
+            entry = f"lb_fake_runner:good_{name}"
+            path = H.make_results_file(
+                tmp_path / f"{name}.json", entry, privileged=privileged,
+                metrics_edit=lambda t, s, m, o=offset: m.update(
+                    normalized_score=m["normalized_score"] + o, rmse=m["rmse"] - o / 10),
+            )
+            # The fake runner reproduces the unshifted metrics; accept the shift here.
+            submit(path, entry, {"name": name, "track": "A", "privileged": privileged},
+                   **(H.submit_options(url) | {"tolerance": Tolerance(abs=1.0)}), store=store)
+        return render_html(store, tmp_path / "site")
+
+
+def test_page_loads_shows_one_row_per_method_and_sorts(tmp_path: Path) -> None:
+    if not CHROMIUM.exists():
+        pytest.skip("Chromium not found at /usr/bin/chromium; enable this test with "
+                    "`apt-get install chromium` (Debian), as .ci/run does")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    index = _build_site(tmp_path)
+    ranked = "#ranked-tiny-test-1"
+
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 700})
+            problems: list[str] = []
+            requests: list[str] = []
+            page.on("pageerror", lambda err: problems.append(str(err)))
+            page.on("console", lambda msg: problems.append(msg.text) if msg.type == "error" else None)
+            page.on("request", lambda req: requests.append(req.url))
+            page.goto(index.as_uri())
+            page.wait_for_selector("html[data-sortable-ready=true]", timeout=10_000)
+
+            def names() -> list[str]:
+                return page.locator(f"{ranked} tbody tr td:nth-child(2)").all_inner_texts()
+
+            assert page.title() == "swarmloc leaderboard"
+            assert page.locator(f"{ranked} tbody tr").count() == 3  # one row per method
+            assert names() == ["high", "mid", "low"]  # ranked by score
+            privileged = page.locator("#privileged-tiny-test-1 tbody tr td:first-child")
+            assert privileged.all_inner_texts() == ["oracle"]
+
+            method_header = page.locator(f"{ranked} thead th", has_text="Method")
+            method_header.locator("button").click()
+            assert names() == ["high", "low", "mid"]
+            assert method_header.get_attribute("aria-sort") == "ascending"
+            method_header.locator("button").click()
+            assert names() == ["mid", "low", "high"]
+            assert method_header.get_attribute("aria-sort") == "descending"
+            page.locator(f"{ranked} thead th", has_text="Score").locator("button").click()
+            assert names() == ["low", "mid", "high"]
+            assert method_header.get_attribute("aria-sort") is None
+
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "leaderboard.png"), full_page=True)
+
+            page.locator(f"{ranked} a", has_text="high").click()
+            page.wait_for_selector("h1")
+            assert page.locator("h1").inner_text() == "high"
+            assert page.locator("a[download]").get_attribute("href").endswith(".json")
+            page.screenshot(path=str(ARTIFACTS / "leaderboard-method.png"), full_page=True)
+
+            assert problems == []
+            assert requests and all(u.startswith("file://") for u in requests), requests
+        finally:
+            browser.close()
