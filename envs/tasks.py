@@ -129,6 +129,16 @@ def vision_loss() -> TaskSpec:
     )
 
 
+def indoor() -> TaskSpec:
+    """The pf-nn indoor scenario (pf-nn §3.1): VisionLoss-v0's hall, swarm and sensors, no outages.
+
+    Six UAVs circle (ω 0.15 rad/s, 0.5 m/s, phases π/3, vertical sine) in a 30 × 20 × 5 m
+    hall with 20 landmarks (camera ≤ 10 m, σ 0.15 m), peer UWB σ 0.2 m, no anchors, 100 s.
+    """
+    base = vision_loss()
+    return TaskSpec.model_validate({**base.model_dump(), "name": "Indoor", "faults": {}, "scoring": {}})
+
+
 def hybrid_noise(percent: int) -> Callable[[], TaskSpec]:
     def make() -> TaskSpec:
         return TaskSpec(
@@ -165,6 +175,7 @@ CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/CascadedFault-v0": cascaded_fault,
     "swarmloc/CascadedFaultRandom-v0": cascaded_fault_random,
     "swarmloc/VisionLoss-v0": vision_loss,
+    "swarmloc/Indoor-v0": indoor,
     **{f"swarmloc/HybridNoise{p}-v0": hybrid_noise(p) for p in (10, 30, 50)},
     "swarmloc/GradualFault-v0": gradual_fault,
 }
