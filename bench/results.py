@@ -47,7 +47,7 @@ from pydantic import (
     model_validator,
 )
 
-SCHEMA_VERSION: int = 1
+SCHEMA_VERSION: Literal[1] = 1
 """Version of the results-file schema written by this module; bump on any change."""
 
 METRIC_NAMES: tuple[str, ...] = (

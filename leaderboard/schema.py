@@ -42,7 +42,7 @@ from swarmloc.leaderboard.entry_points import (
 )
 from swarmloc.leaderboard.errors import InvalidSubmission
 
-SUBMISSION_VERSION: int = 1
+SUBMISSION_VERSION: Literal[1] = 1
 """Version of the submission schema; bump on any change to :class:`Submission`."""
 
 MAX_NAME_CHARS: int = 64

@@ -26,32 +26,24 @@ import random
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import timezone
 from pathlib import Path
 from typing import Any, TypeVar
 
-from sqlalchemy import (
-    BigInteger,
-    DateTime,
-    Float,
-    ForeignKey,
-    Integer,
-    String,
-    Text,
-    UniqueConstraint,
-    create_engine,
-    event,
-    func,
-    inspect,
-    select,
-)
+from sqlalchemy import create_engine, event, func, inspect, select
 from sqlalchemy.engine import Connection, Engine, make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
-from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, relationship
+from sqlalchemy.orm import Session
 
 from swarmloc.bench.results import Aggregate
 from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError
+from swarmloc.leaderboard.records import (
+    Base,
+    LeaderboardEntry,
+    SchemaVersionRow,
+    SubmissionRow,
+    TaskAggregateRow,
+)
 
 ENV_VAR: str = "SWARMLOC_DB"
 """Environment variable naming the store's database URL."""
@@ -92,126 +84,15 @@ Keep in sync with the method registry in ``swarmloc.agents``.
 _RETRIES = 8
 
 
-class Base(DeclarativeBase):
-    """Declarative base of the store's tables."""
-
-
-class SchemaVersionRow(Base):
-    """The single row recording the schema version."""
-
-    __tablename__ = "swarmloc_schema_version"
-
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    version: Mapped[int] = mapped_column(Integer, nullable=False)
-
-
-class SubmissionRow(Base):
-    """One accepted submission."""
-
-    __tablename__ = "submissions"
-    __table_args__ = (
-        UniqueConstraint("method_hash", "suite_name", "suite_version", name="uq_method_suite"),
+def duplicate_error(entry_point: str, method_hash: str, suite_name: str, suite_version: str,
+                    existing: int | None) -> DuplicateSubmission:
+    """The error for a method already stored on a suite (``existing``: its ID if known)."""
+    return DuplicateSubmission(
+        f"method {entry_point!r} (hash {method_hash[:12]}…) is already on the leaderboard "
+        f"for suite {suite_name!r} version {suite_version!r}"
+        + (f" as submission #{existing}" if existing is not None else "")
+        + "; change the method or its weights to submit again"
     )
-
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    created_utc: Mapped[datetime] = mapped_column(DateTime(timezone=True), nullable=False)
-    name: Mapped[str] = mapped_column(String(64), nullable=False)
-    authors: Mapped[str] = mapped_column(String(256), nullable=False)
-    url: Mapped[str | None] = mapped_column(String(512))
-    description: Mapped[str] = mapped_column(Text, nullable=False)
-    track: Mapped[str] = mapped_column(String(1), nullable=False)
-    privileged: Mapped[bool] = mapped_column(nullable=False)
-    deterministic: Mapped[bool] = mapped_column(nullable=False)
-    entry_point: Mapped[str] = mapped_column(String(512), nullable=False)
-    method_hash: Mapped[str] = mapped_column(String(64), nullable=False)
-    weights_sha256: Mapped[str | None] = mapped_column(String(64))
-    suite_name: Mapped[str] = mapped_column(String(128), nullable=False)
-    suite_version: Mapped[str] = mapped_column(String(64), nullable=False)
-    suite_sha256: Mapped[str] = mapped_column(String(64), nullable=False)
-    verified: Mapped[bool] = mapped_column(nullable=False)
-    trusted: Mapped[bool] = mapped_column(nullable=False)
-    verification_seed: Mapped[int | None] = mapped_column(BigInteger)
-    verified_episodes: Mapped[int] = mapped_column(Integer, nullable=False)
-    score_mean: Mapped[float | None] = mapped_column(Float)
-    score_iqm: Mapped[float | None] = mapped_column(Float)
-    score_ci_low: Mapped[float | None] = mapped_column(Float)
-    score_ci_high: Mapped[float | None] = mapped_column(Float)
-    delay_ms: Mapped[float | None] = mapped_column(Float)
-    energy_j: Mapped[float | None] = mapped_column(Float)
-    jitter: Mapped[float | None] = mapped_column(Float)
-    package_version: Mapped[str] = mapped_column(String(64), nullable=False)
-    git_commit: Mapped[str | None] = mapped_column(String(64))
-    results_json: Mapped[str] = mapped_column(Text, nullable=False)
-
-    aggregates: Mapped[list[TaskAggregateRow]] = relationship(
-        back_populates="submission", cascade="all, delete-orphan", lazy="selectin"
-    )
-
-
-class TaskAggregateRow(Base):
-    """Mean, IQM and 95 % CI of one metric on one task for one submission."""
-
-    __tablename__ = "task_aggregates"
-    __table_args__ = (
-        UniqueConstraint("submission_id", "task", "metric", name="uq_submission_task_metric"),
-    )
-
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    submission_id: Mapped[int] = mapped_column(
-        ForeignKey("submissions.id", ondelete="CASCADE"), nullable=False, index=True
-    )
-    task: Mapped[str] = mapped_column(String(128), nullable=False)
-    metric: Mapped[str] = mapped_column(String(32), nullable=False)
-    mean: Mapped[float] = mapped_column(Float, nullable=False)
-    iqm: Mapped[float] = mapped_column(Float, nullable=False)
-    ci_low: Mapped[float] = mapped_column(Float, nullable=False)
-    ci_high: Mapped[float] = mapped_column(Float, nullable=False)
-
-    submission: Mapped[SubmissionRow] = relationship(back_populates="aggregates")
-
-
-@dataclass(frozen=True)
-class LeaderboardEntry:
-    """A stored submission, as views read it.
-
-    ``score`` is the mean normalized score over all (task, seed) runs with its IQM and
-    task-stratified 95 % CI; ``delay_ms``, ``energy_j``, ``jitter`` are means over all
-    runs; ``task_aggregates[task][metric]`` holds per-task statistics (undefined metrics
-    absent). ``results_json`` is the submitted results file, byte for byte.
-    """
-
-    name: str
-    authors: str
-    url: str | None
-    description: str
-    track: str
-    privileged: bool
-    deterministic: bool
-    entry_point: str
-    method_hash: str
-    weights_sha256: str | None
-    suite_name: str
-    suite_version: str
-    suite_sha256: str
-    verified: bool
-    trusted: bool
-    verification_seed: int | None
-    verified_episodes: int
-    score: Aggregate | None
-    delay_ms: float | None
-    energy_j: float | None
-    jitter: float | None
-    package_version: str
-    git_commit: str | None
-    results_json: str
-    task_aggregates: dict[str, dict[str, Aggregate]] = field(default_factory=dict)
-    created_utc: datetime = field(default_factory=lambda: datetime.now(timezone.utc))
-    id: int | None = None
-
-    @property
-    def tasks(self) -> list[str]:
-        """Task IDs with aggregates, sorted."""
-        return sorted(self.task_aggregates)
 
 
 def default_db_url() -> str:
@@ -252,11 +133,10 @@ class LeaderboardStore:
             self._engine = create_engine(url)
         except Exception as err:  # missing driver, bad options
             raise StoreError(f"cannot open database {url.render_as_string()}: {err}") from None
+        self._write_engine: Engine = self._engine
         if self._is_sqlite:
             self._configure_sqlite(self._engine, busy_timeout_s)
             self._write_engine = self._engine.execution_options(swarmloc_begin="IMMEDIATE")
-        else:
-            self._write_engine = self._engine
         self.url = url.render_as_string(hide_password=True)
         self._ensure_schema()
 
@@ -334,6 +214,7 @@ class LeaderboardStore:
                             )
                         MIGRATIONS[version](conn)
                         version += 1
+                    assert row is not None
                     row.version = version
                     session.flush()
 
@@ -351,24 +232,24 @@ class LeaderboardStore:
 
     # -- writes ----------------------------------------------------------------------
 
-    def find_duplicate(self, method_hash: str, suite_name: str, suite_version: str) -> int | None:
-        """ID of a stored submission of the same method on the same suite, if any."""
-        with self._reading() as session:
-            return session.scalar(
-                select(SubmissionRow.id).where(
-                    SubmissionRow.method_hash == method_hash,
-                    SubmissionRow.suite_name == suite_name,
-                    SubmissionRow.suite_version == suite_version,
-                )
+    @staticmethod
+    def _existing_id(session: Session, method_hash: str, suite_name: str,
+                     suite_version: str) -> int | None:
+        return session.scalar(
+            select(SubmissionRow.id).where(
+                SubmissionRow.method_hash == method_hash,
+                SubmissionRow.suite_name == suite_name,
+                SubmissionRow.suite_version == suite_version,
             )
-
-    def _duplicate_error(self, entry: LeaderboardEntry, existing: int | None) -> DuplicateSubmission:
-        return DuplicateSubmission(
-            f"method {entry.entry_point!r} (hash {entry.method_hash[:12]}…) is already on the "
-            f"leaderboard for suite {entry.suite_name!r} version {entry.suite_version!r}"
-            + (f" as submission #{existing}" if existing is not None else "")
-            + "; change the method or its weights to submit again"
         )
+
+    def ensure_new(self, entry_point: str, method_hash: str, suite_name: str,
+                   suite_version: str) -> None:
+        """Raise :class:`DuplicateSubmission` if this method is stored for this suite."""
+        with self._reading() as session:
+            existing = self._existing_id(session, method_hash, suite_name, suite_version)
+        if existing is not None:
+            raise duplicate_error(entry_point, method_hash, suite_name, suite_version, existing)
 
     def add(self, entry: LeaderboardEntry) -> int:
         """Store a submission and its per-task aggregates in one transaction.
@@ -395,15 +276,12 @@ class LeaderboardStore:
 
         def work() -> int:
             with self._writing() as session:
-                existing = session.scalar(
-                    select(SubmissionRow.id).where(
-                        SubmissionRow.method_hash == entry.method_hash,
-                        SubmissionRow.suite_name == entry.suite_name,
-                        SubmissionRow.suite_version == entry.suite_version,
-                    )
+                existing = self._existing_id(
+                    session, entry.method_hash, entry.suite_name, entry.suite_version
                 )
                 if existing is not None:
-                    raise self._duplicate_error(entry, existing)
+                    raise duplicate_error(entry.entry_point, entry.method_hash,
+                                          entry.suite_name, entry.suite_version, existing)
                 row = SubmissionRow(**values)
                 row.aggregates = [
                     TaskAggregateRow(task=task, metric=metric, **agg.model_dump())
@@ -417,7 +295,8 @@ class LeaderboardStore:
         try:
             return self._retrying(work)
         except IntegrityError:  # a concurrent writer stored the same method first
-            raise self._duplicate_error(entry, None) from None
+            raise duplicate_error(entry.entry_point, entry.method_hash, entry.suite_name,
+                                  entry.suite_version, None) from None
 
     # -- reads -----------------------------------------------------------------------
 
@@ -503,6 +382,7 @@ class LeaderboardStore:
 
 __all__ = [
     "ENV_VAR",
+    "duplicate_error",
     "MIGRATIONS",
     "SCHEMA_VERSION",
     "SHIPPED_REFERENCE_METHODS",

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from swarmloc.bench.stats import aggregate, aggregate_across_tasks
-from swarmloc.leaderboard.errors import DuplicateSubmission, InvalidSubmission
+from swarmloc.leaderboard.errors import InvalidSubmission
 from swarmloc.leaderboard.schema import (
     SizeLimits,
     SubmissionMetadata,
@@ -182,16 +182,9 @@ def submit(
     own_store = store is None
     active = store if store is not None else LeaderboardStore(db_url)
     try:
-        existing = active.find_duplicate(
-            validated.method_hash, validated.results.suite.name, validated.results.suite.version
-        )
-        if existing is not None:  # cheap check before spending time on verification
-            raise DuplicateSubmission(
-                f"method {entry_point!r} (hash {validated.method_hash[:12]}…) is already on the "
-                f"leaderboard for suite {validated.results.suite.name!r} version "
-                f"{validated.results.suite.version!r} as submission #{existing}; change the "
-                f"method or its weights to submit again"
-            )
+        # Cheap check before spending time on verification; add() checks again atomically.
+        active.ensure_new(entry_point, validated.method_hash, validated.results.suite.name,
+                          validated.results.suite.version)
         report = None
         if not trust:
             report = verify_results(

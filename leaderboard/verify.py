@@ -308,7 +308,7 @@ def run_in_worker(
                 f"{detail}".rstrip()
             )
         how = f"died with {_signal_name(code)}" if code < 0 else f"exited with status {code}"
-        hint = " (possibly the memory limit of %.0f MiB)" % mib if code < 0 else ""
+        hint = f" (possibly the memory limit of {mib:.0f} MiB)" if code < 0 else ""
         raise VerificationFailed(
             f"verification worker for method {method!r} {how}{hint} without a result; "
             f"stderr:\n{_tail(stderr_path) or '(empty)'}"

@@ -398,7 +398,7 @@ def test_concurrent_submits_from_two_processes_both_land(db_url: str, tmp_path: 
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         ))
     outputs = [p.communicate(timeout=60) for p in procs]
-    for proc, (out, err) in zip(procs, outputs):
+    for proc, (_out, err) in zip(procs, outputs, strict=True):
         assert proc.returncode == 0, err
     with LeaderboardStore(db_url) as store:
         names = [e.name for e in store.entries()]
