@@ -296,9 +296,11 @@ def run_in_worker(
         if code == 0 and isinstance(response, dict) and response.get("ok"):
             return list(response.get("episodes", [])), wall
         if isinstance(response, dict) and response.get("kind") == "memory" or code == _EXIT_MEMORY:
+            detail = response.get("message") if isinstance(response, dict) else None
             raise VerificationFailed(
                 f"method {method!r} exceeded the memory limit of {mib:.0f} MiB "
                 f"while re-running {len(episodes)} episode(s)"
+                + (f" ({detail})" if detail else "")
             )
         if isinstance(response, dict) and not response.get("ok", True):
             detail = response.get("traceback") or response.get("message") or ""

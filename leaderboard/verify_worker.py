@@ -26,6 +26,7 @@ here, so the limit applies to the method, not to the worker.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import json
 import os
@@ -99,6 +100,31 @@ def normalize_episode(item: Any) -> dict[str, Any]:
     return {"task": str(task), "seed": int(seed), "metrics": clean}
 
 
+_OUT_OF_MEMORY_SIGNS = ("failed to map segment", "cannot allocate memory", "bad_alloc",
+                        "out of memory", "unable to allocate")
+
+
+def is_out_of_memory(err: BaseException) -> bool:
+    """True when an error (or its cause chain) comes from hitting the address-space cap.
+
+    Besides ``MemoryError``, a capped process sees ``ENOMEM`` from the OS, shared libraries
+    that fail to map ("failed to map segment") and C++ ``std::bad_alloc`` surfacing as
+    ``RuntimeError``.
+    """
+    seen: set[int] = set()
+    current: BaseException | None = err
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, MemoryError):
+            return True
+        if isinstance(current, OSError) and current.errno == errno.ENOMEM:
+            return True
+        if any(sign in str(current).lower() for sign in _OUT_OF_MEMORY_SIGNS):
+            return True
+        current = current.__cause__ or current.__context__
+    return False
+
+
 def _write(path: str, payload: Mapping[str, Any]) -> None:
     tmp = f"{path}.tmp"
     with open(tmp, "w", encoding="utf-8") as handle:
@@ -144,13 +170,13 @@ def main(argv: list[str] | None = None) -> int:
         request = json.load(handle)
     try:
         episodes = run(request)
-    except MemoryError as err:
-        _write(args.response, _failure("memory", err))
-        return EXIT_MEMORY
     except BadOutput as err:
         _write(args.response, _failure("bad_output", err))
         return EXIT_BAD_OUTPUT
     except BaseException as err:  # noqa: BLE001 - any failure of submitted code is reported
+        if is_out_of_memory(err):
+            _write(args.response, _failure("memory", err))
+            return EXIT_MEMORY
         _write(args.response, _failure("exception", err))
         return EXIT_EXCEPTION
     _write(args.response, {"ok": True, "episodes": episodes})

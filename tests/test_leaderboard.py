@@ -306,6 +306,25 @@ def test_sampler_is_seeded_and_sized() -> None:
         sample_episodes(pool, 0.0)
 
 
+def test_out_of_memory_is_recognized_in_its_disguises() -> None:
+    import errno
+
+    from swarmloc.leaderboard.verify_worker import is_out_of_memory
+
+    assert is_out_of_memory(MemoryError())
+    assert is_out_of_memory(OSError(errno.ENOMEM, "Cannot allocate memory"))
+    assert is_out_of_memory(ImportError("libtorch_cpu.so: failed to map segment from shared object"))
+    assert is_out_of_memory(RuntimeError("std::bad_alloc"))
+    try:
+        try:
+            raise MemoryError
+        except MemoryError as inner:
+            raise RuntimeError("wrapped") from inner
+    except RuntimeError as outer:
+        assert is_out_of_memory(outer)
+    assert not is_out_of_memory(RuntimeError("simulated crash inside the method"))
+
+
 def test_worker_gets_a_clean_environment(
     db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
