@@ -4,7 +4,7 @@ Three forms are accepted:
 
 * ``package.module:factory`` — importable from an installed package or a search path;
 * ``path/to/file.py:factory`` — a file anywhere on disk;
-* ``name`` — a method registered by swarmloc (e.g. a shipped reference method).
+* ``name`` — a method registered by swarmloc (e.g. ``uniform``, ``huber+smooth``).
 
 The leaderboard process never imports submitted code: sources are located with
 ``importlib.machinery.PathFinder`` (which reads directories, not modules) and only the
@@ -27,7 +27,7 @@ MAX_ENTRY_POINT_CHARS: int = 512
 _DOTTED = r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*"
 _MODULE_FORM = re.compile(rf"^(?P<module>{_DOTTED}):(?P<attr>{_DOTTED})$")
 _FILE_FORM = re.compile(rf"^(?P<file>[^:\x00-\x1f]+\.py):(?P<attr>{_DOTTED})$")
-_REGISTERED_FORM = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
+_REGISTERED_FORM = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+\-]{0,127}$")
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def parse_entry_point(text: str) -> EntryPoint:
     """
     allowed = (
         "allowed forms: 'package.module:factory', 'path/to/file.py:factory', "
-        "or a registered method name (letters, digits, '_', '.', '-')"
+        "or a registered method name (letters, digits, '_', '.', '-', '+')"
     )
     if not isinstance(text, str) or not text or len(text) > MAX_ENTRY_POINT_CHARS:
         raise ValueError(

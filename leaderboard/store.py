@@ -59,26 +59,20 @@ runs inside the opening transaction, so a failed upgrade leaves the old schema i
 Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores upgrade too.
 """
 
-SHIPPED_REFERENCE_METHODS: frozenset[str] = frozenset(
-    {
-        "uniform",
-        "oracle",
-        "classical",
-        "chi2-gate",
-        "mappo",
-        "dead-reckoning",
-        "pf",
-        "pf-nn",
-        "imm",
-        "imm-arkf",
-        "federated",
-        "ci",
-    }
+_SHIPPED_TRACK_A: tuple[str, ...] = (
+    "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "random", "oracle",
 )
-"""Registered names of the reference methods shipped with swarmloc.
+_SHIPPED_TRACK_B: tuple[str, ...] = ("dead-reckoning",)
 
-Only these entry points may be submitted with ``trust=True`` (verification skipped).
-Keep in sync with the method registry in ``swarmloc.agents``.
+SHIPPED_REFERENCE_METHODS: frozenset[str] = frozenset(
+    (*_SHIPPED_TRACK_A, *_SHIPPED_TRACK_B, *(f"{name}+smooth" for name in _SHIPPED_TRACK_A))
+)
+"""Registered names of the reference methods shipped with swarmloc (and their Track A
+``+smooth`` variants).
+
+Only these entry points may be submitted with ``trust=True`` (verification skipped). It
+mirrors ``swarmloc.agents.registry.REGISTRY`` (the leaderboard may not import agents); a
+test keeps the two in sync.
 """
 
 _RETRIES = 8

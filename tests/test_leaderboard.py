@@ -32,6 +32,7 @@ from swarmloc.leaderboard.cli_commands import (
     run_leaderboard,
     run_submit,
 )
+from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import (
     DuplicateSubmission,
     InvalidSubmission,
@@ -248,6 +249,23 @@ def test_bad_metadata_is_rejected(meta: dict, message: str, db_url: str, tmp_pat
         _submit(path, "lb_fake_runner:good_meta", db_url, meta)
 
 
+def test_default_lookup_uses_the_bench_suite_registry(tmp_path: Path) -> None:
+    suites = pytest.importorskip("swarmloc.bench.suites")
+    from swarmloc.bench.results import load_results, write_results
+    from swarmloc.leaderboard.schema import make_submission, validate_submission
+
+    quick = suites.get_suite("quick")
+    path = H.make_results_file(tmp_path / "q.json", "lb_fake_runner:good_quick",
+                               episodes=list(quick.episodes))
+    raw = load_results(path)
+    suite_info = raw.suite.model_copy(update={"name": quick.name, "version": quick.version,
+                                              "sha256": quick.sha256})
+    write_results(path, raw.model_copy(update={"suite": suite_info}))
+    submission = make_submission(path, "lb_fake_runner:good_quick", {"name": "q", "track": "A"})
+    validated = validate_submission(submission)  # default lookup: swarmloc.bench.suites
+    assert validated.suite.name == "quick" and len(validated.results.episodes) == len(quick.episodes)
+
+
 def test_mismatched_claims_are_rejected(db_url: str, tmp_path: Path) -> None:
     path = H.make_results_file(tmp_path / "m.json", "lb_fake_runner:good_claims")
     with pytest.raises(InvalidSubmission) as info:
@@ -277,6 +295,18 @@ def test_trust_is_only_for_shipped_methods(db_url: str, tmp_path: Path) -> None:
     path = H.make_results_file(tmp_path / "s.json", shipped)
     receipt = _submit(path, shipped, db_url, {"name": "shipped", "track": "A"}, trust=True)
     assert receipt.report is None and receipt.entry.trusted and not receipt.entry.verified
+
+
+def test_shipped_allow_list_matches_the_agents_registry() -> None:
+    registry = pytest.importorskip("swarmloc.agents.registry")
+    shipped = store_module.SHIPPED_REFERENCE_METHODS
+    assert set(registry.REGISTRY) <= shipped
+    for name in shipped:
+        base = name.removesuffix("+smooth")
+        assert base in registry.REGISTRY, f"{name!r} is not a registered method"
+        if name.endswith("+smooth"):
+            assert registry.REGISTRY[base].track == "A"
+        assert parse_entry_point(name).kind == "registered"
 
 
 def test_nondeterministic_methods_get_a_tolerance(db_url: str, tmp_path: Path) -> None:
