@@ -1,0 +1,208 @@
+"""The method registry: name → factory and metadata, and loading user methods.
+
+``load_method(text)`` accepts
+
+* a registered name, e.g. ``uniform`` or ``dead-reckoning`` (see :data:`REGISTRY`);
+* a registered Track A name with ``+smooth``, e.g. ``huber+smooth``: the policy wrapped
+  in adaptive Markov smoothing (madrl eq. 15–17);
+* ``package.module:factory`` — an importable callable returning a method;
+* ``path/to/file.py:factory`` — the same from a file.
+
+A factory is called with no argument, or with ``weights=<path>`` when a weights file is
+given. The method it returns is a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B
+``Estimator`` (has ``step``); its ``privileged`` and ``deterministic`` attributes are
+read (defaults False and True).
+
+Adding a shipped method: one :class:`MethodEntry` line in :data:`REGISTRY` with a lazy
+``module:attr`` factory string (modules are imported only when the method is loaded, so
+the registry stays cheap to import even for torch-based methods).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Literal
+
+from .protocols import is_deterministic, is_privileged
+from .smoothing import MarkovSmoothing
+
+Track = Literal["A", "B"]
+SMOOTH_SUFFIX = "+smooth"
+
+
+@dataclass(frozen=True)
+class MethodEntry:
+    """A registered method.
+
+    Attributes:
+        name: registry name.
+        factory: ``module:attr`` of a zero-argument callable returning the method.
+        track: ``"A"`` (link trust in the env's CEKF) or ``"B"`` (full estimator).
+        privileged: reads fault labels (shown apart, never ranked).
+        deterministic: re-running an episode reproduces it exactly.
+        summary: one line for tables and ``--help``.
+    """
+
+    name: str
+    factory: str
+    track: Track
+    privileged: bool
+    deterministic: bool
+    summary: str
+
+
+_A = "swarmloc.agents.classical"
+#: every shipped method, in display order
+REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
+    MethodEntry("uniform", f"{_A}:uniform_policy", "A", False, True, "standard CEKF, α = 1 (score 0)"),
+    MethodEntry("fixed", f"{_A}:fixed_policy", "A", False, True, "fixed trust α = 0.6 (madrl Exp. 3)"),
+    MethodEntry("huber", f"{_A}:huber_policy", "A", False, True, "Huber weight of √NIS, k = 1.345"),
+    MethodEntry("chi2-gate", f"{_A}:chi2_gate_policy", "A", False, True, "hard χ²₀.₉₅ gate, α_min beyond"),
+    MethodEntry("chi2-soft", f"{_A}:chi2_soft_policy", "A", False, True, "exp. down-weighting past χ²₀.₉₅ (dtvirm)"),
+    MethodEntry("federated-coef", f"{_A}:federated_coef_policy", "A", False, True,
+                "information-allocation coefficient (federated eq. 17–21)"),
+    MethodEntry("random", f"{_A}:random_policy", "A", False, True, "α ~ U(0, 1), seeded (the floor)"),
+    MethodEntry("dead-reckoning", "swarmloc.agents.dead_reckoning:dead_reckoning", "B", False, True,
+                "IMU only from the initial prior"),
+    MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True, "privileged: α_min on labelled faults (score 1)"),
+)}
+
+#: the two methods that define the normalized score (0 and 1)
+REFERENCE_UNIFORM, REFERENCE_ORACLE = "uniform", "oracle"
+
+_ENTRY = re.compile(r"^(?P<module>[^:]+):(?P<attr>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)$")
+
+
+@dataclass(frozen=True)
+class LoadedMethod:
+    """A method instance and what the runner needs to know about it.
+
+    Attributes:
+        name: registered name, or the factory's attribute name for user methods.
+        entry_point: the text it was loaded from.
+        track, privileged, deterministic: see :class:`MethodEntry`.
+        method: the instance (a ``LinkTrustPolicy`` or an ``Estimator``).
+    """
+
+    name: str
+    entry_point: str
+    track: Track
+    privileged: bool
+    deterministic: bool
+    method: Any
+
+
+def method_names(include_privileged: bool = True) -> list[str]:
+    """Registered method names in display order.
+
+    Args:
+        include_privileged: include the privileged oracle.
+    """
+    return [n for n, e in REGISTRY.items() if include_privileged or not e.privileged]
+
+
+def get_entry(name: str) -> MethodEntry:
+    """The registry entry of ``name``.
+
+    Raises:
+        KeyError: unknown name (the message lists the registered ones).
+    """
+    if name not in REGISTRY:
+        raise KeyError(f"unknown method {name!r}; registered: {', '.join(REGISTRY)} "
+                       f"(or '<name>{SMOOTH_SUFFIX}', 'package.module:factory', 'path/to/file.py:factory')")
+    return REGISTRY[name]
+
+
+def _resolve(module_name: str, attr: str, text: str) -> Callable[..., Any]:
+    """Import ``module_name`` (a dotted module or a ``.py`` path) and get ``attr``."""
+    if module_name.endswith(".py"):
+        path = Path(module_name)
+        if not path.is_file():
+            raise FileNotFoundError(f"method file {path} (from {text!r}) does not exist")
+        mod_name = f"swarmloc_user_{path.stem}"
+        spec = importlib.util.spec_from_file_location(mod_name, path)
+        if spec is None or spec.loader is None:
+            raise ImportError(f"cannot load method file {path} (from {text!r})")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        spec.loader.exec_module(module)
+    else:
+        module = importlib.import_module(module_name)
+    obj: Any = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise AttributeError(f"{module_name!r} has no attribute {attr!r} (from {text!r})")
+        obj = getattr(obj, part)
+    if not callable(obj):
+        raise TypeError(f"{text!r} names {type(obj).__name__}, not a callable factory")
+    return obj
+
+
+def _call_factory(factory: Callable[..., Any], weights: str | Path | None, text: str) -> Any:
+    if weights is None:
+        return factory()
+    try:
+        params = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        params = {}
+    if "weights" not in params and not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        raise TypeError(f"a weights file was given but the factory of {text!r} takes no 'weights' argument")
+    return factory(weights=str(weights))
+
+
+def track_of(method: Any, text: str = "") -> Track:
+    """``"A"`` for an object with ``act`` (link-trust policy), ``"B"`` for one with ``step`` (estimator).
+
+    Raises:
+        TypeError: neither.
+    """
+    if callable(getattr(method, "act", None)) and callable(getattr(method, "reset", None)):
+        return "A"
+    if callable(getattr(method, "step", None)) and callable(getattr(method, "reset", None)):
+        return "B"
+    raise TypeError(f"method {text or type(method).__name__!r} is neither a LinkTrustPolicy (reset + act) "
+                    f"nor an Estimator (reset + step); see swarmloc.agents.protocols")
+
+
+def load_method(text: str, weights: str | Path | None = None) -> LoadedMethod:
+    """Build a method from a registered name or an entry point.
+
+    Args:
+        text: ``name``, ``name+smooth``, ``package.module:factory`` or ``path/to/file.py:factory``.
+        weights: optional weights file handed to the factory as ``weights=``.
+
+    Returns:
+        The ``LoadedMethod``.
+
+    Raises:
+        KeyError: unknown registered name. ImportError / AttributeError / TypeError: the
+        entry point cannot be loaded or does not return a method.
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError(f"method must be a non-empty string, got {text!r}")
+    text = text.strip()
+    smooth = text.endswith(SMOOTH_SUFFIX) and ":" not in text
+    base = text[: -len(SMOOTH_SUFFIX)] if smooth else text
+    match = _ENTRY.match(base)
+    if match is None:
+        entry = get_entry(base)
+        module_name, attr = entry.factory.split(":")
+        method = _call_factory(_resolve(module_name, attr, text), weights, text)
+        name = entry.name
+    else:
+        method = _call_factory(_resolve(match["module"], match["attr"], text), weights, text)
+        name = match["attr"].rsplit(".", 1)[-1]
+    track = track_of(method, text)
+    if smooth:
+        if track != "A":
+            raise ValueError(f"{SMOOTH_SUFFIX} applies to link-trust (Track A) methods; {base!r} is Track {track}")
+        method = MarkovSmoothing(method)
+        name = f"{name}{SMOOTH_SUFFIX}"
+    return LoadedMethod(name=name, entry_point=text, track=track, privileged=is_privileged(method),
+                        deterministic=is_deterministic(method), method=method)

@@ -1,0 +1,185 @@
+"""Evaluation suites: frozen lists of (task ID, seed) episodes.
+
+Seed ranges (episode seeds are non-negative integers; methods never see them):
+
+| range | use |
+|---|---|
+| ``[0, 1_000_000)`` | training: anything, as much as you like |
+| ``[1_000_000, 2_000_000)`` | **test** seeds: ``standard-v0`` and ``quick`` use 1_000_000 + i |
+| ``[2_000_000, 3_000_000)`` | **dev** (tuning) seeds: ``dev`` uses 2_000_000 + i |
+| ``≥ 3_000_000`` | reserved for future suites |
+
+Training code must call :func:`check_training_seeds` on the seeds it draws; tuning may
+use dev seeds, never test seeds. Suites:
+
+* ``standard-v0`` — the leaderboard suite: the 17 tasks of v0 (:data:`STANDARD_V0_TASKS`,
+  frozen: a task added later joins in ``standard-v1``), 32 test seeds each
+  (1_000_000 … 1_000_031). Its SHA-256 is pinned in the tests.
+* ``quick`` — every task in the catalogue, the first 4 test seeds (a subset of
+  ``standard-v0``'s episodes); for demos and smoke tests.
+* ``dev`` — every task in the catalogue, 8 dev seeds (2_000_000 … 2_000_007); for tuning.
+
+The hash of a suite is :func:`swarmloc.bench.results.suite_sha256` of its episode list
+(the sorted (task, seed) pairs as compact JSON), the same value a results file records.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from swarmloc.bench.results import suite_sha256
+from swarmloc.envs.tasks import CATALOGUE
+
+TRAINING_SEED_LIMIT = 1_000_000
+TEST_SEED_START = 1_000_000
+DEV_SEED_START = 2_000_000
+RESERVED_SEED_START = 3_000_000
+
+#: the tasks of ``standard-v0`` (frozen with the suite)
+STANDARD_V0_TASKS: tuple[str, ...] = (
+    "swarmloc/Ideal-v0",
+    "swarmloc/NLOS-v0",
+    "swarmloc/NLOSStep-v0",
+    "swarmloc/Scale2-v0",
+    "swarmloc/Scale4-v0",
+    "swarmloc/Scale6-v0",
+    "swarmloc/Scale8-v0",
+    "swarmloc/Scale16-v0",
+    "swarmloc/Scale32-v0",
+    "swarmloc/CascadedFault-v0",
+    "swarmloc/CascadedFaultRandom-v0",
+    "swarmloc/VisionLoss-v0",
+    "swarmloc/Indoor-v0",
+    "swarmloc/HybridNoise10-v0",
+    "swarmloc/HybridNoise30-v0",
+    "swarmloc/HybridNoise50-v0",
+    "swarmloc/GradualFault-v0",
+)
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A frozen list of episodes.
+
+    Attributes:
+        name: e.g. ``standard-v0``.
+        version: version string (bumped whenever the episode list changes).
+        episodes: ``(task ID, seed)`` pairs, grouped by task in catalogue order.
+        description: one line.
+    """
+
+    name: str
+    version: str
+    episodes: tuple[tuple[str, int], ...]
+    description: str = ""
+    sha256: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sha256", suite_sha256(self.episodes))
+
+    @property
+    def tasks(self) -> list[str]:
+        """Task IDs in suite order (each once)."""
+        return list(dict.fromkeys(task for task, _ in self.episodes))
+
+    def seeds(self, task: str) -> list[int]:
+        """Seeds of ``task`` in suite order."""
+        return [s for t, s in self.episodes if t == task]
+
+
+def _episodes(tasks: Iterable[str], start: int, count: int) -> tuple[tuple[str, int], ...]:
+    return tuple((task, start + i) for task in tasks for i in range(count))
+
+
+def _standard_v0() -> Suite:
+    return Suite("standard-v0", "0", _episodes(STANDARD_V0_TASKS, TEST_SEED_START, 32),
+                 "leaderboard suite: 17 tasks × 32 test seeds (1_000_000 … 1_000_031)")
+
+
+def _quick() -> Suite:
+    return Suite("quick", "0", _episodes(CATALOGUE, TEST_SEED_START, 4),
+                 "every task × the first 4 test seeds (demo, smoke tests)")
+
+
+def _dev() -> Suite:
+    return Suite("dev", "0", _episodes(CATALOGUE, DEV_SEED_START, 8),
+                 "every task × 8 dev seeds (2_000_000 … 2_000_007), for tuning")
+
+
+SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev}
+
+
+def suite_names() -> list[str]:
+    """Names accepted by :func:`get_suite`."""
+    return list(SUITES)
+
+
+def get_suite(name: str) -> Suite:
+    """The suite called ``name``.
+
+    Raises:
+        KeyError: unknown name (the message lists the known suites).
+    """
+    if name not in SUITES:
+        raise KeyError(f"unknown suite {name!r}; known suites: {', '.join(SUITES)}")
+    return SUITES[name]()
+
+
+def _canonical_task(task: str) -> str:
+    return task if task.startswith("swarmloc/") else f"swarmloc/{task}"
+
+
+def restrict_tasks(suite: Suite, tasks: Sequence[str] | str) -> Suite:
+    """The part of ``suite`` on some of its tasks (``--tasks``).
+
+    The result is a different suite (name ``<name>-subset``, its own hash), so a results
+    file of a restricted run is never mistaken for a full one.
+
+    Args:
+        suite: the suite.
+        tasks: task IDs (the ``swarmloc/`` prefix may be omitted), or one comma-separated string.
+
+    Returns:
+        The restricted suite, in the suite's task order.
+
+    Raises:
+        ValueError: empty selection or a task the suite does not hold (the message lists them).
+    """
+    if isinstance(tasks, str):
+        tasks = [t for t in tasks.split(",")]
+    wanted = [_canonical_task(t.strip()) for t in tasks if t.strip()]
+    if not wanted:
+        raise ValueError(f"--tasks selects no task; choose from: {', '.join(suite.tasks)}")
+    unknown = [t for t in wanted if t not in suite.tasks]
+    if unknown:
+        raise ValueError(f"task(s) {unknown} not in suite {suite.name!r}; choose from: {', '.join(suite.tasks)}")
+    keep = set(wanted)
+    episodes = tuple((t, s) for t, s in suite.episodes if t in keep)
+    return Suite(f"{suite.name}-subset", suite.version, episodes,
+                 f"{suite.name} restricted to {len(keep)} task(s)")
+
+
+def check_training_seeds(seeds: Iterable[int]) -> None:
+    """Refuse seeds that training may not use (test, dev and reserved ranges).
+
+    Args:
+        seeds: the seeds a training run draws.
+
+    Raises:
+        ValueError: naming the offending seeds; training seeds must be in [0, 1_000_000).
+    """
+    bad = []
+    for seed in seeds:
+        s = int(seed)
+        if not 0 <= s < TRAINING_SEED_LIMIT:
+            bad.append(s)
+    if bad:
+        kinds = []
+        if any(TEST_SEED_START <= s < DEV_SEED_START for s in bad):
+            kinds.append("test")
+        if any(DEV_SEED_START <= s < RESERVED_SEED_START for s in bad):
+            kinds.append("dev")
+        what = " and ".join(kinds) or "out-of-range"
+        raise ValueError(f"{len(bad)} {what} seed(s) given to training, e.g. {bad[:5]}; "
+                         f"training seeds must be in [0, {TRAINING_SEED_LIMIT})")
