@@ -1,0 +1,467 @@
+"""MAPPO link trust (madrl §2.2–2.3): CTDE training on the native batched torchrl env.
+
+One readable file, CleanRL style. The *actor* (``ChannelActor`` in ``mappo_policy.py``)
+is the paper's 128–64 ReLU MLP applied to every channel of every UAV with the same
+weights: per channel it sees that channel's F = 11 features and outputs a trust logit μ;
+during training u ~ N(μ, σ²) and the applied trust is α = sigmoid(u) (the paper's
+sigmoid output layer; sampling the logit keeps PPO's log-probabilities exact, with no
+inverse squashing). The *critic* (``SwarmCritic``) is centralized: it sees the whole
+swarm (every UAV's channels and its filter state, the env's ``"state"``) during training
+only, and is permutation-invariant over UAVs (mean-pooled per-channel and per-UAV
+embeddings), so one critic trains across swarm sizes. Each channel is a decision with
+its own PPO ratio; it shares its UAV's advantage (per-UAV standard reward v0).
+
+Multi-task: one torchrl ``Collector`` per task (each on its own batched env), cycled
+per batch, so one policy learns NLOS, step NLOS, swarm sizes 2…8, cascaded faults and
+the ideal case. Episode seeds are training seeds (< 1_000_000), drawn deterministically
+from the run's seed. At execution the actor is deterministic (u = μ) and wrapped in
+adaptive Markov smoothing (madrl eq. 15–17): see ``mappo_policy.py``.
+
+Run: ``swarmloc train mappo --frames 2000000`` (``swarmloc.bench.train_cli``) or
+``python -m swarmloc.agents.mappo --frames 400`` (no dev-seed evaluation).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.modules import ProbabilisticActor
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+from swarmloc.envs import torchrl_env
+from swarmloc.envs.observation import N_FEATURES, VALID, squash
+from swarmloc.envs.reward import RewardWeights
+from swarmloc.envs.tasks import get_spec
+
+from .mappo_policy import ChannelActor, MappoPolicy, count_flops_per_channel
+from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
+
+#: the training mixture (madrl Exp. 1, 2/4/6, 3, 5)
+DEFAULT_TASKS: tuple[str, ...] = (
+    "NLOS-v0", "NLOSStep-v0", "Scale2-v0", "Scale4-v0", "Scale6-v0", "Scale8-v0",
+    "CascadedFault-v0", "CascadedFaultRandom-v0", "Ideal-v0",
+)
+#: exclusive upper bound of training episode seeds (``swarmloc.bench.suites``)
+TRAINING_SEED_LIMIT = 1_000_000
+#: where the per-UAV reward terms live in the env's tensordict, and their TensorBoard names
+REWARD_TERMS = {"accuracy": "reward_accuracy", "delay_penalty": "reward_delay", "energy_penalty": "reward_energy",
+                "jitter_penalty": "reward_jitter", "position_error": "position_error", "delay_ms": "delay_ms"}
+G = "uav"  # the env's agent group
+
+
+@dataclass
+class MappoConfig:
+    """Hyper-parameters of a MAPPO link-trust training run."""
+
+    tasks: tuple[str, ...] = DEFAULT_TASKS
+    """training tasks (registered IDs, ``swarmloc/`` prefix optional); one collector each, cycled per batch"""
+    frames: int = 2_000_000
+    """total environment frames (one frame = one env step of one episode, all its UAVs and channels)"""
+    seed: int = 1
+    """run seed: torch's generator and the training episode seeds derive from it (must be < 1_000_000)"""
+    num_envs: int = 16
+    """episodes stepped together per task (the env's batch size B)"""
+    rollout_steps: int = 100
+    """steps per collector batch; a divisor of every task's episode length keeps seeds aligned"""
+    epochs: int = 4
+    """PPO epochs over each batch"""
+    minibatches: int = 4
+    """minibatches per epoch"""
+    learning_rate: float = 3e-4
+    """Adam learning rate (linearly annealed to 0)"""
+    anneal_lr: bool = True
+    """linearly anneal the learning rate over the run"""
+    gamma: float = 0.97
+    """discount per 0.1 s step (horizon ≈ 3 s, the CEKF's error memory)"""
+    gae_lambda: float = 0.95
+    """GAE λ"""
+    clip_epsilon: float = 0.2
+    """PPO ratio clip"""
+    entropy_coef: float = 1e-3
+    """entropy bonus weight"""
+    critic_coef: float = 0.5
+    """value loss weight"""
+    max_grad_norm: float = 0.5
+    """gradient clipping (global norm)"""
+    reward_scale: float = 0.1
+    """rewards are multiplied by this before GAE (returns of order 1 for the critic)"""
+    hidden: tuple[int, ...] = (128, 64)
+    """actor hidden widths (madrl §2.2.2: 128, 64)"""
+    critic_hidden: int = 64
+    """critic embedding width"""
+    init_trust: float = 0.8
+    """trust the untrained actor outputs"""
+    init_log_std: float = -0.5
+    """initial log σ of the Gaussian on the trust logit"""
+    accuracy_only: bool = False
+    """madrl Exp. 7 ablation: λ = 0 for delay, energy and jitter"""
+    eval_every: int = 500_000
+    """frames between dev-seed evaluations (needs an evaluator; 0 = only at the end)"""
+    checkpoint_every: int = 500_000
+    """frames between checkpoints in ``run_dir`` (0 = only at the end)"""
+    run_dir: str = "runs/mappo"
+    """TensorBoard logs and checkpoints go here"""
+    threads: int = 1
+    """torch and numba threads (1: deterministic and polite on a shared machine)"""
+    progress: bool = True
+    """show a tqdm progress bar"""
+    reward_weights: dict = field(default_factory=dict)
+    """extra ``RewardWeights`` overrides (advanced; ``accuracy_only`` sets delay/energy/jitter to 0)"""
+
+    def __post_init__(self) -> None:
+        if not self.tasks:
+            raise ValueError("tasks must name at least one task")
+        for name in ("frames", "num_envs", "rollout_steps", "epochs", "minibatches", "threads"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if not 0 <= self.seed < TRAINING_SEED_LIMIT:
+            raise ValueError(f"seed must be a training seed in [0, {TRAINING_SEED_LIMIT}), got {self.seed!r}")
+        if (self.num_envs * self.rollout_steps) % self.minibatches:
+            raise ValueError(f"num_envs·rollout_steps = {self.num_envs * self.rollout_steps} must be divisible by "
+                             f"minibatches = {self.minibatches}")
+        if not (0.0 < self.gamma <= 1.0 and 0.0 <= self.gae_lambda <= 1.0):
+            raise ValueError(f"gamma must be in (0, 1] and gae_lambda in [0, 1], got {self.gamma}, {self.gae_lambda}")
+
+    @property
+    def frames_per_batch(self) -> int:
+        """Frames per collector batch (B · rollout_steps)."""
+        return self.num_envs * self.rollout_steps
+
+    def weights(self) -> RewardWeights:
+        """The reward weights of this run (standard v0 unless ``accuracy_only`` / overrides)."""
+        extra = dict(self.reward_weights)
+        if self.accuracy_only:
+            extra.update(delay=0.0, energy=0.0, jitter=0.0)
+        return RewardWeights(**extra)
+
+
+# --------------------------------------------------------------------------- networks
+
+
+class SwarmCritic(nn.Module):
+    """Centralized per-UAV value V_i(s) from the global state, permutation-invariant over UAVs.
+
+    Channel embeddings φ(o_ij) are mean- and max-pooled over each UAV's present channels
+    (so channel order and count do not matter), joined with the UAV's filter state from
+    the env's ``"state"`` (speed and prior position std, squashed) into a UAV embedding
+    e_i; the swarm context is the mean of e_j over UAVs. V_i = ψ(e_i, mean_j e_j).
+    Permuting the UAVs permutes the values and nothing else.
+
+    Args:
+        n_features: F.
+        width: embedding width.
+    """
+
+    def __init__(self, n_features: int = N_FEATURES, width: int = 128) -> None:
+        super().__init__()
+        half = width // 2
+        self.channel = nn.Sequential(nn.Linear(n_features, width), nn.ReLU(), nn.Linear(width, half), nn.ReLU())
+        self.uav = nn.Sequential(nn.Linear(2 * half + 2, width), nn.ReLU(), nn.Linear(width, half), nn.ReLU())
+        self.head = nn.Sequential(nn.Linear(2 * half, width), nn.ReLU(), nn.Linear(width, 1))
+
+    def forward(self, obs: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """Values ``(..., N, 1)`` from observations ``(..., N, L, F)`` and state ``(..., S)``."""
+        n, n_l, n_f = obs.shape[-3:]
+        lead = obs.shape[:-3]
+        # state = [obs (N·L·F), prior position (3N), velocity (3N), position std (N)]
+        tail = state[..., n * n_l * n_f:]
+        if tail.shape[-1] != 7 * n:
+            raise ValueError(f"state has {state.shape[-1]} entries; expected N·L·F + 7N = {n * n_l * n_f + 7 * n}")
+        speed = tail[..., 3 * n:6 * n].reshape(*lead, n, 3).norm(dim=-1)
+        pos_std = tail[..., 6 * n:7 * n]
+        uav_state = torch.stack([squash(speed, 1.0), squash(pos_std, 1.0)], dim=-1)  # (..., N, 2)
+        valid = obs[..., VALID:VALID + 1]  # (..., N, L, 1)
+        h = self.channel(obs)
+        h_mean = (h * valid).sum(-2) / valid.sum(-2).clamp(min=1.0)
+        h_max = (h * valid).amax(-2)  # embeddings are ≥ 0 (ReLU), so absent channels never win
+        e = self.uav(torch.cat([h_mean, h_max, uav_state], dim=-1))  # (..., N, half)
+        context = e.mean(-2, keepdim=True).expand_as(e)
+        return self.head(torch.cat([e, context], dim=-1))
+
+
+class MaskedNormal(torch.distributions.Normal):
+    """Gaussian on the trust logit; absent channels carry no decision (log-prob and entropy 0).
+
+    Args:
+        loc, scale: ``(..., L)`` mean and std of the logit.
+        valid: ``(..., L)`` bool, measurement present.
+    """
+
+    def __init__(self, loc: torch.Tensor, scale: torch.Tensor, valid: torch.Tensor) -> None:
+        super().__init__(loc, scale, validate_args=False)
+        self.valid = valid
+
+    def log_prob(self, value: torch.Tensor) -> torch.Tensor:
+        return torch.where(self.valid, super().log_prob(value), torch.zeros_like(value))
+
+    def entropy(self) -> torch.Tensor:
+        return torch.where(self.valid, super().entropy(), torch.zeros_like(self.loc))
+
+    @property
+    def deterministic_sample(self) -> torch.Tensor:
+        return self.loc
+
+
+class _ActorParams(nn.Module):
+    """``ChannelActor`` → (μ, σ, valid) per channel, the inputs of ``MaskedNormal``."""
+
+    def __init__(self, actor: ChannelActor) -> None:
+        super().__init__()
+        self.actor = actor
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        loc = self.actor(obs)
+        return loc, self.actor.log_std.exp().expand_as(loc), obs[..., VALID] > 0.5
+
+
+def _logit_to_trust(logit: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """α = sigmoid(u) on present channels, 1 on absent ones (as ``MappoPolicy`` does)."""
+    return torch.where(valid, torch.sigmoid(logit), torch.ones_like(logit))
+
+
+def build_modules(cfg: MappoConfig) -> tuple[ChannelActor, ProbabilisticActor, TensorDictSequential, TensorDictModule]:
+    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module."""
+    actor_net = ChannelActor(N_FEATURES, cfg.hidden, cfg.init_trust, cfg.init_log_std)
+    params = TensorDictModule(_ActorParams(actor_net), in_keys=[(G, "observation")],
+                              out_keys=[(G, "loc"), (G, "scale"), (G, "valid")])
+    prob_actor = ProbabilisticActor(
+        params, in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid")},
+        out_keys=[(G, "trust_logit")], distribution_class=MaskedNormal, return_log_prob=True,
+        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
+    to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[(G, "action")])
+    policy = TensorDictSequential(prob_actor, to_trust)
+    critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden), in_keys=[(G, "observation"), "state"],
+                              out_keys=[(G, "state_value")])
+    return actor_net, prob_actor, policy, critic
+
+
+# --------------------------------------------------------------------------- boilerplate
+
+
+class EpisodeSeeds:
+    """Training episode seeds for one task's batched env: deterministic, all < 1_000_000.
+
+    Episodes of a task have a fixed length and all B envs start together, so they end
+    together; before each reset the env is told the next B seeds (``set_seed(s)`` plays
+    s … s+B−1). ``drawn`` lists every seed handed out (checked by the caller).
+    """
+
+    def __init__(self, run_seed: int, task_index: int, batch_size: int) -> None:
+        self.rng = np.random.default_rng([run_seed, task_index, 0x5EED])
+        self.batch_size = batch_size
+        self.drawn: list[int] = []
+
+    def next_base(self) -> int:
+        base = int(self.rng.integers(0, TRAINING_SEED_LIMIT - self.batch_size))
+        self.drawn.extend(range(base, base + self.batch_size))
+        return base
+
+
+@dataclass
+class TrainResult:
+    """What ``train`` returns."""
+
+    actor_state: dict
+    frames: int
+    wall_time_s: float
+    iterations: int
+    episode_seeds: list[int]
+    last_eval: dict[str, float]
+
+
+def _team_returns(reward: torch.Tensor, done: torch.Tensor, running: np.ndarray) -> list[float]:
+    """Finished episodes' team returns from a ``(B, T)`` batch (``running`` carries partial sums)."""
+    team = reward.mean(dim=(-2, -1)).numpy()  # (B, T): mean over UAVs
+    ended = done.reshape(done.shape[0], done.shape[1]).numpy()
+    out: list[float] = []
+    for k in range(team.shape[1]):
+        running += team[:, k]
+        if ended[:, k].any():
+            out.extend(running[ended[:, k]].tolist())
+            running[ended[:, k]] = 0.0
+    return out
+
+
+def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] | None = None,
+          check_seeds: Callable[[list[int]], None] | None = None, writer=None) -> TrainResult:
+    """Train the MAPPO link-trust actor and critic.
+
+    Args:
+        cfg: the run's configuration.
+        evaluate: optional dev-seed evaluator, called with a deterministic, unsmoothed
+            ``MappoPolicy`` snapshot every ``cfg.eval_every`` frames and at the end;
+            returns metrics logged under ``eval/``.
+        check_seeds: optional guard called with every episode seed before it is used
+            (e.g. ``swarmloc.bench.suites.check_training_seeds``).
+        writer: optional TensorBoard ``SummaryWriter`` (default: one in ``cfg.run_dir``).
+
+    Returns:
+        ``TrainResult`` with the actor's state_dict.
+    """
+    import numba
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm import tqdm
+
+    # ---- determinism and threads
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
+    run_dir = Path(cfg.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    writer = writer or SummaryWriter(str(run_dir))
+    writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
+
+    actor_net, prob_actor, policy, critic = build_modules(cfg)
+    flops_per_channel = count_flops_per_channel(actor_net) + SMOOTHING_FLOPS_PER_CHANNEL
+
+    # ---- one batched env + collector per task; training seeds only
+    envs, collectors, seeders = [], [], []
+    for t, task in enumerate(cfg.tasks):
+        n_channels = get_spec(task).n_channels
+        env = torchrl_env(task, cfg.num_envs, reward_weights=cfg.weights(),
+                          policy_flops=flops_per_channel * n_channels)
+        n_steps = env.task_spec.n_steps
+        if n_steps % cfg.rollout_steps:
+            raise ValueError(f"rollout_steps={cfg.rollout_steps} must divide the episode length of {task} "
+                             f"({n_steps} steps) so that reset seeds can be set between batches")
+        seeder = EpisodeSeeds(cfg.seed, t, cfg.num_envs)
+        base = seeder.next_base()
+        if check_seeds is not None:
+            check_seeds(list(range(base, base + cfg.num_envs)))
+        env.set_seed(base)
+        envs.append(env)
+        seeders.append(seeder)
+        collectors.append(Collector(env, policy, frames_per_batch=cfg.frames_per_batch, total_frames=-1,
+                                    trust_policy=True, exploration_type=ExplorationType.RANDOM,
+                                    auto_register_policy_transforms=False))
+    iterators = [iter(c) for c in collectors]
+    steps_done = [0] * len(cfg.tasks)
+    running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
+
+    # ---- PPO pieces
+    loss = ClipPPOLoss(prob_actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_bonus=True,
+                       entropy_coeff=cfg.entropy_coef, critic_coeff=cfg.critic_coef, loss_critic_type="l2",
+                       normalize_advantage=False)
+    keys = dict(action=(G, "trust_logit"), sample_log_prob=(G, "trust_logit_log_prob"), value=(G, "state_value"),
+                reward=(G, "reward"), done=(G, "done"), terminated=(G, "terminated"), advantage=(G, "advantage"),
+                value_target=(G, "value_target"))
+    loss.set_keys(**keys)
+    gae = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
+    gae.set_keys(**{k: v for k, v in keys.items() if k not in ("action", "sample_log_prob")})
+    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.learning_rate)
+    # one buffer per task: N and L (the storage's shape) differ between tasks
+    replays = [ReplayBuffer(storage=LazyTensorStorage(cfg.frames_per_batch), sampler=SamplerWithoutReplacement(),
+                            batch_size=cfg.frames_per_batch // cfg.minibatches) for _ in cfg.tasks]
+
+    n_iters = -(-cfg.frames // cfg.frames_per_batch)
+    frames, last_eval, next_eval, next_ckpt = 0, {}, cfg.eval_every or cfg.frames, cfg.checkpoint_every or cfg.frames
+    start = time.time()
+    bar = tqdm(total=cfg.frames, disable=not cfg.progress, unit="frame", desc="mappo")
+    for it in range(n_iters):
+        t = it % len(cfg.tasks)
+        task = cfg.tasks[t]
+        # the episode ends in this batch → tell the env the seeds of the next one
+        n_steps = envs[t].task_spec.n_steps
+        if (steps_done[t] + cfg.rollout_steps) % n_steps == 0:
+            base = seeders[t].next_base()
+            if check_seeds is not None:
+                check_seeds(list(range(base, base + cfg.num_envs)))
+            envs[t].set_seed(base)
+        batch = next(iterators[t])  # (B, T)
+        steps_done[t] += cfg.rollout_steps
+        frames += batch.numel()
+        if cfg.anneal_lr:
+            optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
+
+        # ---- logging of the raw rollout
+        nxt = batch["next"]
+        returns = _team_returns(nxt[G, "reward"], nxt["done"], running[t])
+        if returns:
+            writer.add_scalar("charts/episodic_return", float(np.mean(returns)), frames)
+            writer.add_scalar(f"charts/episodic_return_{task.removeprefix('swarmloc/')}", float(np.mean(returns)),
+                              frames)
+        for term, name in REWARD_TERMS.items():
+            writer.add_scalar(f"charts/{name}", nxt[G, "info", term].mean().item(), frames)
+        valid = batch[G, "valid"]
+        writer.add_scalar("charts/trust_mean", batch[G, "action"][valid].mean().item(), frames)
+
+        # ---- GAE on the per-UAV reward; done flags broadcast to every UAV
+        reward_shape = nxt[G, "reward"].shape
+        for flag in ("done", "terminated"):
+            nxt.set((G, flag), nxt[flag].unsqueeze(-1).expand(reward_shape))
+        nxt.set((G, "reward"), nxt[G, "reward"] * cfg.reward_scale)
+        with torch.no_grad():
+            gae(batch)
+        adv = batch[G, "advantage"]
+        batch.set((G, "advantage"), (adv - adv.mean()) / adv.std().clamp(min=1e-6))
+
+        # ---- PPO epochs over minibatches
+        replay = replays[t]
+        replay.extend(batch.reshape(-1))
+        stats: dict[str, list[float]] = {}
+        for _ in range(cfg.epochs):
+            for _ in range(cfg.minibatches):
+                mb = replay.sample()
+                out = loss(mb)
+                total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+                optimizer.zero_grad()
+                total.backward()
+                torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg.max_grad_norm)
+                optimizer.step()
+                for key in ("loss_objective", "loss_critic", "entropy", "kl_approx", "clip_fraction",
+                            "explained_variance"):
+                    if key in out.keys():
+                        stats.setdefault(key, []).append(float(out[key].detach().mean()))
+        for key, vals in stats.items():
+            writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
+        writer.add_scalar("charts/log_std", actor_net.log_std.item(), frames)
+        writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
+        sps = frames / max(time.time() - start, 1e-9)
+        writer.add_scalar("charts/SPS", sps, frames)
+        bar.update(batch.numel())
+        bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
+                        sps=f"{sps:.0f}")
+
+        # ---- evaluation and checkpoints
+        final = it == n_iters - 1
+        if evaluate is not None and (frames >= next_eval or final):
+            next_eval += cfg.eval_every or cfg.frames
+            last_eval = evaluate(MappoPolicy(copy.deepcopy(actor_net).eval()))
+            for key, value in last_eval.items():
+                writer.add_scalar(f"eval/{key}", value, frames)
+        if frames >= next_ckpt or final:
+            next_ckpt += cfg.checkpoint_every or cfg.frames
+            torch.save({"actor": actor_net.state_dict(), "critic": critic.module.state_dict(),
+                        "optimizer": optimizer.state_dict(), "frames": frames, "config": asdict(cfg)},
+                       run_dir / "checkpoint.pt")
+    bar.close()
+    for c in collectors:
+        c.shutdown()
+    writer.flush()
+    seeds = [s for sd in seeders for s in sd.drawn]
+    return TrainResult(actor_state={k: v.detach().clone() for k, v in actor_net.state_dict().items()},
+                       frames=frames, wall_time_s=time.time() - start, iterations=n_iters, episode_seeds=seeds,
+                       last_eval=last_eval)
+
+
+if __name__ == "__main__":
+    import tyro
+
+    config = tyro.cli(MappoConfig)
+    result = train(config)
+    path = Path(config.run_dir) / "mappo.pt"
+    torch.save(result.actor_state, path)
+    print(f"trained {result.frames} frames in {result.wall_time_s:.0f} s → {path}")

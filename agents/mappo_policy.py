@@ -1,0 +1,219 @@
+"""MAPPO link trust at execution time: the shared per-channel actor as a ``LinkTrustPolicy``.
+
+The actor is the madrl §2.2.2 network: per channel, the F = 11 features (see
+``swarmloc.envs.observation``) pass through a 128–64 ReLU MLP to one trust logit μ and
+α_raw = sigmoid(μ) ∈ (0, 1] — the paper's sigmoid output layer. The same weights serve
+every channel of every UAV, so one policy runs on any number of UAVs N and channels L.
+During training (``swarmloc.agents.mappo``) the logit is sampled, u ~ N(μ, σ²), and
+α = sigmoid(u); at execution the actor is deterministic (u = μ) and, for the ``mappo``
+method, wrapped in adaptive Markov smoothing (madrl eq. 15–17, β_max 0.85, γ 2.0).
+
+Methods registered from this module (see ``swarmloc.agents.registry``):
+
+| name | what runs |
+|---|---|
+| ``mappo`` | shipped weights, deterministic actor + adaptive Markov smoothing |
+| ``mappo-no-smoothing`` | the same weights, raw α (madrl Exp. 6 "no smoothing") |
+| ``mappo-no-isolation`` | trust fixed at 1 after training (madrl Exp. 6 "no evaluation") + smoothing |
+| ``mappo-accuracy-only`` | weights trained with λ = 0 for delay, energy and jitter (madrl Exp. 7) + smoothing |
+
+Only torch is needed here (no torchrl): evaluation stays cheap to import.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from swarmloc.envs.channels import ChannelLayout
+from swarmloc.envs.observation import N_FEATURES, VALID
+
+from .protocols import TrustInput
+from .smoothing import MarkovSmoothing
+
+#: folder of the shipped weights (``mappo.pt`` + ``mappo.json``, ...)
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+#: the logit is soft-limited to ±LOGIT_LIMIT, so α ∈ [3.4e-4, 0.99966]: below α_th (0.05)
+#: the CEKF skips the channel; near 1 it is the nominal R0
+LOGIT_LIMIT = 8.0
+#: madrl §2.3.3 smoothing parameters
+BETA_MAX, SMOOTHING_GAMMA = 0.85, 2.0
+
+
+class ChannelActor(nn.Module):
+    """Per-channel trust actor shared across channels and UAVs (madrl §2.2.2).
+
+    ``forward(obs)`` maps ``(..., F)`` features to the trust logit μ ``(...)``, soft-limited
+    to ±``LOGIT_LIMIT``; α_raw = sigmoid(μ). ``log_std`` is the state-independent
+    log σ of the training-time Gaussian on the logit (unused at execution).
+
+    Args:
+        n_features: F.
+        hidden: hidden layer widths (the paper: 128, 64).
+        init_trust: α the untrained actor outputs (sets the last bias), in (0, 1).
+        init_log_std: initial log σ of the logit noise.
+    """
+
+    def __init__(self, n_features: int = N_FEATURES, hidden: tuple[int, ...] = (128, 64), init_trust: float = 0.8,
+                 init_log_std: float = -0.5) -> None:
+        super().__init__()
+        if not 0.0 < init_trust < 1.0:
+            raise ValueError(f"init_trust must be in (0, 1), got {init_trust!r}")
+        layers: list[nn.Module] = []
+        width = n_features
+        for h in hidden:
+            layers += [nn.Linear(width, h), nn.ReLU()]
+            width = h
+        head = nn.Linear(width, 1)
+        # a small last layer: the untrained actor starts near α = init_trust everywhere
+        nn.init.uniform_(head.weight, -1e-3, 1e-3)
+        nn.init.constant_(head.bias, float(np.log(init_trust / (1.0 - init_trust))))
+        self.body = nn.Sequential(*layers, head)
+        self.log_std = nn.Parameter(torch.tensor(float(init_log_std)))
+        self.n_features = n_features
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """Trust logit μ ``(...)`` from features ``(..., F)``."""
+        if obs.shape[-1] != self.n_features:
+            raise ValueError(f"obs must end in F = {self.n_features} features, got shape {tuple(obs.shape)}")
+        raw = self.body(obs).squeeze(-1)
+        # μ = c · tanh(raw / c): a smooth limit that keeps gradients, unlike a clamp
+        return LOGIT_LIMIT * torch.tanh(raw / LOGIT_LIMIT)
+
+    def trust(self, obs: torch.Tensor) -> torch.Tensor:
+        """Deterministic α_raw = sigmoid(μ) ``(...)`` in (0, 1)."""
+        return torch.sigmoid(self(obs))
+
+
+def hidden_sizes(state_dict: dict[str, torch.Tensor]) -> tuple[int, ...]:
+    """Hidden widths of a ``ChannelActor`` from its state_dict (``body.{2k}.weight`` rows)."""
+    widths = []
+    k = 0
+    while f"body.{k}.weight" in state_dict:
+        widths.append(int(state_dict[f"body.{k}.weight"].shape[0]))
+        k += 2
+    if len(widths) < 2:
+        raise ValueError(f"not a ChannelActor state_dict: keys {sorted(state_dict)}")
+    return tuple(widths[:-1])
+
+
+def load_actor(weights: str | Path) -> ChannelActor:
+    """A ``ChannelActor`` from a plain state_dict file (``torch.save(actor.state_dict())``).
+
+    Raises:
+        FileNotFoundError: no such file (the message says how to train one).
+        ValueError: the file is not a ChannelActor state_dict.
+    """
+    path = Path(weights)
+    if not path.is_file():
+        raise FileNotFoundError(f"MAPPO weights {path} not found; train them with "
+                                f"`swarmloc train mappo --weights-out {path}` (see agents/weights/mappo.json)")
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(state, dict) or "body.0.weight" not in state:
+        raise ValueError(f"{path} is not a ChannelActor state_dict (expected keys body.*, log_std)")
+    n_features = int(state["body.0.weight"].shape[1])
+    actor = ChannelActor(n_features=n_features, hidden=hidden_sizes(state))
+    actor.load_state_dict(state)
+    actor.eval()
+    return actor
+
+
+def count_flops_per_channel(actor: ChannelActor) -> float:
+    """FLOPs of one channel's forward pass, counted once with ``torch.utils.flop_counter``.
+
+    ``FlopCounterMode`` counts the matrix products (2 FLOPs per multiply-add); the biases,
+    ReLUs, tanh limit and sigmoid add a few per unit, counted here as one FLOP per unit.
+    """
+    from torch.utils.flop_counter import FlopCounterMode
+
+    x = torch.zeros(1, actor.n_features)
+    with torch.no_grad(), FlopCounterMode(display=False) as counter:
+        actor.trust(x)
+    units = sum(m.out_features for m in actor.body if isinstance(m, nn.Linear))
+    return float(counter.get_total_flops() + 2 * units + 4)
+
+
+class MappoPolicy:
+    """The trained MAPPO actor as a ``LinkTrustPolicy`` (numpy in, numpy out).
+
+    Args:
+        actor: a ``ChannelActor`` (e.g. from ``load_actor``).
+        isolation: False → trust fixed at 1 (the madrl "no evaluation" ablation; the
+            network is not run and costs no FLOPs).
+
+    Attributes:
+        privileged: False (reads only the observation).
+        deterministic: True (the mean logit, no sampling).
+        flops_per_channel: FLOPs of the network per present channel per step.
+    """
+
+    privileged = False
+    deterministic = True
+
+    def __init__(self, actor: ChannelActor, isolation: bool = True) -> None:
+        self.actor = actor.eval()
+        self.isolation = bool(isolation)
+        self.flops_per_channel = count_flops_per_channel(actor) if self.isolation else 0.0
+        self._shape: tuple[int, int, int] = (0, 0, 0)
+
+    def reset(self, batch_size: int, layout: ChannelLayout, keys: np.ndarray) -> None:
+        """Start B episodes (the actor is memoryless: its memory is the previous-trust feature)."""
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        self._shape = (batch_size, *layout.kind.shape)
+
+    def act(self, inp: TrustInput) -> np.ndarray:
+        """α_raw ``(B, N, L)`` float64 in (0, 1] from the observation ``(B, N, L, F)``."""
+        obs = np.asarray(inp.obs)
+        if obs.ndim != 4 or obs.shape[-1] != self.actor.n_features:
+            raise ValueError(f"obs must have shape (B, N, L, {self.actor.n_features}), got {obs.shape}")
+        if not self.isolation:
+            return np.ones(obs.shape[:-1])
+        with torch.no_grad():
+            # a copy: the caller's buffers are read-only views that it reuses
+            alpha = self.actor.trust(torch.tensor(obs, dtype=torch.float32))
+        out = alpha.numpy().astype(np.float64)
+        # absent channels are skipped by the CEKF anyway; report full trust there
+        return np.where(obs[..., VALID] > 0.5, out, 1.0)
+
+    def __repr__(self) -> str:
+        return f"MappoPolicy(isolation={self.isolation}, flops_per_channel={self.flops_per_channel:.0f})"
+
+
+def weights_metadata(weights: str | Path) -> dict:
+    """The provenance record next to a weights file (``<name>.json``), or {} if absent."""
+    meta = Path(weights).with_suffix(".json")
+    return json.loads(meta.read_text()) if meta.is_file() else {}
+
+
+# --------------------------------------------------------------------------- registry factories
+
+
+def _weights(weights: str | Path | None, default: str) -> Path:
+    return Path(weights) if weights is not None else WEIGHTS_DIR / default
+
+
+def mappo(weights: str | Path | None = None) -> MarkovSmoothing:
+    """``mappo``: shipped weights, deterministic actor + adaptive Markov smoothing (β_max 0.85, γ 2)."""
+    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo.pt"))), BETA_MAX, SMOOTHING_GAMMA)
+
+
+def mappo_no_smoothing(weights: str | Path | None = None) -> MappoPolicy:
+    """``mappo-no-smoothing``: the same weights, raw α applied (madrl Exp. 6)."""
+    return MappoPolicy(load_actor(_weights(weights, "mappo.pt")))
+
+
+def mappo_no_isolation(weights: str | Path | None = None) -> MarkovSmoothing:
+    """``mappo-no-isolation``: trust fixed at 1 after training, smoothing kept (madrl Exp. 6 "no evaluation")."""
+    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo.pt")), isolation=False), BETA_MAX,
+                           SMOOTHING_GAMMA)
+
+
+def mappo_accuracy_only(weights: str | Path | None = None) -> MarkovSmoothing:
+    """``mappo-accuracy-only``: weights trained with λ_delay = λ_energy = λ_jitter = 0 (madrl Exp. 7) + smoothing."""
+    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo_accuracy_only.pt"))), BETA_MAX,
+                           SMOOTHING_GAMMA)
