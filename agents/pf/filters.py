@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from swarmloc.agents.protocols import EstimatorOutput, Measurements, PrivilegedInfo, TaskFacts
@@ -31,6 +32,8 @@ from . import core
 from .pfnn import PFNNWeights, load_weights, random_weights, sgd_step
 
 _INT = np.int64
+#: below this many particle slots (B·N·M_max) one thread beats the pool's synchronisation
+PARALLEL_MIN_PARTICLES = 40_000
 
 
 @dataclass(frozen=True)
@@ -112,6 +115,8 @@ class _State:
     ess: np.ndarray
     used: np.ndarray
     resampled: np.ndarray
+    used_sum: np.ndarray
+    n_steps: int
     W1: np.ndarray
     b1: np.ndarray
     W2: np.ndarray
@@ -127,16 +132,22 @@ class ParticleFilter:
         config: filter settings (see :class:`PFConfig`).
         network: frozen weight-correction network (``None``: plain PF).
         name: method name reported in results.
+        parallel: run the kernel over a thread pool (True), on one thread (False), or pick
+            by batch size (None: threads from ``PARALLEL_MIN_PARTICLES`` particle slots on).
+            Results are identical either way.
 
     Attributes after each ``step``: ``used`` ``(B, N)`` particles used, ``ess`` ``(B, N)``,
-    ``resampled`` ``(B, N)``, ``counts`` ``(B, N)`` particles carried into the next step.
+    ``resampled`` ``(B, N)``, ``counts`` ``(B, N)`` particles carried into the next step,
+    ``mean_particles`` ``(B, N)`` particles per step averaged since reset.
     """
 
     privileged: bool = False
     deterministic: bool = True
 
-    def __init__(self, config: PFConfig = STANDARD, network: PFNNWeights | None = None, name: str = "pf"):
+    def __init__(self, config: PFConfig = STANDARD, network: PFNNWeights | None = None, name: str = "pf",
+                 parallel: bool | None = None):
         self.config = config
+        self.parallel = parallel
         self.network = network
         self.name = name
         self._s: _State | None = None
@@ -159,7 +170,7 @@ class ParticleFilter:
             logw=np.full((n_b, n, m), -np.inf), count=np.zeros((n_b, n), dtype=_INT), est=np.zeros((n_b, n, 6)),
             prior_pos=np.zeros((n_b, n, 3)), scratch=np.zeros((n_b, n, m, 6)), wbuf=np.zeros((n_b, n, m)),
             index=np.zeros((n_b, n, m), dtype=_INT), ess=np.zeros((n_b, n)), used=np.zeros((n_b, n), dtype=_INT),
-            resampled=np.zeros((n_b, n), dtype=np.bool_),
+            resampled=np.zeros((n_b, n), dtype=np.bool_), used_sum=np.zeros((n_b, n)), n_steps=0,
             W1=np.zeros((n_b, n, hidden, 6)), b1=np.zeros((n_b, n, hidden)), W2=np.zeros((n_b, n, hidden)),
             b2=np.zeros((n_b, n)),
             range_mask=np.isin(facts.kind, (ANCHOR, PEER)), vector_mask=np.isin(facts.kind, (LANDMARK, GPS, PEER_REL)),
@@ -178,6 +189,13 @@ class ParticleFilter:
         self._anchors = np.ascontiguousarray(facts.anchors, dtype=np.float64).reshape(-1, 3)
         self._landmarks = np.ascontiguousarray(facts.landmarks, dtype=np.float64).reshape(-1, 3)
         self._accel_sigma = c.accel_inflation * facts.imu_sigma
+        self._prm = core.step_params(facts.dt, self._accel_sigma, c.perturb_pos, c.perturb_vel, c.resample_below,
+                                     c.grow_below, c.shrink_above, c.n_min, c.n_max, c.grow_step, c.shrink_step,
+                                     self.network is not None, c.correction_base, c.correction_gain)
+        if self.parallel is None:
+            self._parallel = n_b * n * m >= PARALLEL_MIN_PARTICLES and numba.get_num_threads() > 1
+        else:
+            self._parallel = bool(self.parallel)
         self._nn_flops = core.nn_particle_flops(hidden) if self.network is not None else 0
 
     def step(self, meas: Measurements) -> EstimatorOutput:
@@ -190,13 +208,12 @@ class ParticleFilter:
                 f"got {meas.imu.shape}, {meas.z.shape}, {meas.valid.shape}")
         if meas.step < 1:
             raise ValueError(f"meas.step must be >= 1 (1-based filter step), got {meas.step}")
-        core.pf_step(
-            s.keys, meas.step, f.dt, meas.imu, meas.z, meas.valid, self._kind, self._target, self._sigma,
-            self._anchors, self._landmarks, self._accel_sigma, c.perturb_pos, c.perturb_vel,
-            c.resample_below, c.grow_below, c.shrink_above, c.n_min, c.n_max, c.grow_step, c.shrink_step,
-            self.network is not None, c.correction_base, c.correction_gain, s.W1, s.b1, s.W2, s.b2,
-            s.particles, s.logw, s.count, s.est, s.prior_pos, s.scratch, s.wbuf, s.index, s.ess, s.used,
-            s.resampled)
+        step_fn = core.pf_step if self._parallel else core.pf_step_serial
+        step_fn(s.keys, meas.step, self._prm, meas.imu, meas.z, meas.valid, self._kind, self._target, self._sigma,
+                self._anchors, self._landmarks, s.W1, s.b1, s.W2, s.b2, s.particles, s.logw, s.count, s.est,
+                s.prior_pos, s.scratch, s.wbuf, s.index, s.ess, s.used, s.resampled)
+        s.used_sum += s.used
+        s.n_steps += 1
         return EstimatorOutput(positions=s.est[:, :, :3].copy(), flops=self.flops(meas.valid))
 
     # ------------------------------------------------------------------ accounting
@@ -223,6 +240,22 @@ class ParticleFilter:
     def used(self) -> np.ndarray:
         """``(B, N)`` particles used in the last step."""
         return self._require_state().used.copy()
+
+    @property
+    def mean_particles(self) -> np.ndarray:
+        """``(B, N)`` particles used per step, averaged over the steps since reset."""
+        s = self._require_state()
+        return s.used_sum / max(s.n_steps, 1)
+
+    @property
+    def particles(self) -> np.ndarray:
+        """``(B, N, M_max, 6)`` the particle buffers (a copy; slots ≥ ``counts`` are stale)."""
+        return self._require_state().particles.copy()
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """``(B, N, 6)`` the current state estimates x̂ (a copy)."""
+        return self._require_state().est.copy()
 
     @property
     def counts(self) -> np.ndarray:
