@@ -18,6 +18,10 @@ import numpy as np
 from . import cekf
 from .specs import TaskSpec
 from .world import World
+from .worlds import AnyWorld, make_world
+
+#: private per-episode state of the simulated world that one ``sense`` changes (Gauss–Markov NLOS)
+_WORLD_PRIVATE_STATE = ("_gm_bias", "_gm_left")
 
 
 @dataclass
@@ -63,11 +67,20 @@ class LinkTrustCore:
     Args:
         spec: the task.
         batch_size: B.
+        world: the world to drive (default: ``make_world(spec, batch_size)``, the simulated
+            ``World`` or, for a recorded task, the ``RecordedWorld``). Anything with the
+            world interface works: ``spec``, ``batch_size``, ``layout``, ``anchors``,
+            ``landmarks``, ``buffers``, ``steps``, ``x0``, ``reset(seeds, mask)``, ``sense()``.
     """
 
-    def __init__(self, spec: TaskSpec, batch_size: int):
+    def __init__(self, spec: TaskSpec, batch_size: int, world: World | AnyWorld | None = None):
         self.spec = spec
-        self.world = World(spec, batch_size)
+        if world is None:
+            world = make_world(spec, batch_size)
+        elif world.batch_size != batch_size or world.spec != spec:
+            raise ValueError(f"the injected world runs {world.spec.task_id} with batch size {world.batch_size}; "
+                             f"the core was asked for {spec.task_id} with batch size {batch_size}")
+        self.world = world
         self.layout = self.world.layout
         n_b, n, n_l = batch_size, spec.n_uav, self.layout.n_channels
         self.batch_size, self.n_uav, self.n_channels = n_b, n, n_l
@@ -136,21 +149,23 @@ class LinkTrustCore:
         keep = np.ones(self.batch_size, dtype=bool)
         keep[idx] = False
         saved = {name: getattr(self, name)[keep].copy() for name in ("x", "P", "_prior_pos", "_z", "_valid")}
-        w = self.world
-        saved_world = (w.steps[keep].copy(), w.buffers.pos[keep].copy(), w.buffers.vel[keep].copy(),
-                       w.buffers.imu[keep].copy(), w.buffers.label[keep].copy(), w.buffers.valid[keep].copy(),
-                       w.buffers.injected[keep].copy(), w.buffers.z[keep].copy(), w._gm_bias[keep].copy(),
-                       w._gm_left[keep].copy())
+        world_state = self._world_state()
+        saved_world = [a[keep].copy() for a in world_state]
         o = self._out
         saved_out = {name: getattr(o, name)[keep].copy() for name in ("resid", "pred", "nis", "jerk", "valid")}
         self._advance()
         for name, value in saved.items():
             getattr(self, name)[keep] = value
-        (w.steps[keep], w.buffers.pos[keep], w.buffers.vel[keep], w.buffers.imu[keep], w.buffers.label[keep],
-         w.buffers.valid[keep], w.buffers.injected[keep], w.buffers.z[keep], w._gm_bias[keep],
-         w._gm_left[keep]) = saved_world
+        for array, value in zip(world_state, saved_world):
+            array[keep] = value
         for name, value in saved_out.items():
             getattr(o, name)[keep] = value
+
+    def _world_state(self) -> list[np.ndarray]:
+        """The world's ``(B, ...)`` arrays that one ``sense`` changes (restored for episodes not advanced)."""
+        w, buf = self.world, self.world.buffers
+        arrays = [w.steps, buf.pos, buf.vel, buf.imu, buf.label, buf.valid, buf.injected, buf.z]
+        return arrays + [getattr(w, name) for name in _WORLD_PRIVATE_STATE if hasattr(w, name)]
 
     def check_trust(self, trust: np.ndarray) -> np.ndarray:
         """Validate a trust array: shape ``(B, N, L)``, finite; returns it as float64."""

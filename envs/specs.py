@@ -92,8 +92,26 @@ class RandomWaypoints(Frozen):
     high: Vec3 = (10.0, 10.0, 4.0)
 
 
+class RecordedFlight(Frozen):
+    """A real flight replayed from an imported data set instead of a simulated trajectory.
+
+    Nothing is simulated: truth, IMU and ranges come from the log (see
+    ``swarmloc.envs.recorded.replay``); build the world with ``swarmloc.envs.make_world``.
+    Step 0 of an episode is log time ``start``; the episode lasts the spec's ``duration``.
+    The data set is not shipped: it is located at run time (``SWARMLOC_DATA``).
+    """
+
+    kind: Literal["recorded"] = "recorded"
+    dataset: Literal["util-twr"] = Field(default="util-twr", description="imported data set folder")
+    log: str = Field(default="twr-obs-log1", pattern=r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$", description="flight log")
+    start: NonNegFloat = Field(default=9.15, description="log time of step 0 [s]")
+    calibration: str | None = Field(
+        default="log00", pattern=r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$",
+        description="log whose ranges against mocap give the per-anchor range bias; None = raw ranges")
+
+
 Trajectory = Annotated[
-    Union[AccelCircle, PhasedCircles, FigureEightChain, LeaderFollowerLine, RandomWaypoints],
+    Union[AccelCircle, PhasedCircles, FigureEightChain, LeaderFollowerLine, RandomWaypoints, RecordedFlight],
     Field(discriminator="kind"),
 ]
 

@@ -23,6 +23,7 @@ from .specs import (
     NlosStep,
     PeerLinks,
     PhasedCircles,
+    RecordedFlight,
     Scoring,
     Sensors,
     TaskSpec,
@@ -166,6 +167,30 @@ def gradual_fault() -> TaskSpec:
     )
 
 
+def util_flight() -> TaskSpec:
+    """The UTIL dataset's real Crazyflie flight ``twr-obs-log1``, replayed (not simulated).
+
+    One UAV, 8 UWB anchors (two-way ranging, ≈10 Hz each), IMU at 1 kHz, Vicon truth.
+    Scored from take-off (log time 9.15 s) to landing (59.62 s): the README's airborne
+    window, which the truth altitude reproduces (``util_flight.airborne_window``). The
+    anchor positions come from the data folder at run time; the spec holds one placeholder
+    per anchor (see ``swarmloc.envs.recorded.replay``). Noise settings are measured, not
+    fitted to a score: range σ 0.15 m (the README's per-anchor residual std of the
+    line-of-sight anchors is 0.07–0.17 m, and the log00 calibration leaves 0.02–0.15 m of
+    per-anchor bias in this flight); IMU σ 1.0 m/s² (integrating the AHRS world
+    acceleration for 1 s leaves a horizontal velocity error of 0.11–0.16 m/s std, which a
+    white acceleration noise at 10 ms steps matches with σ ≈ 1.1–1.6 m/s²); the take-off
+    pad is known to 0.1 m and the vehicle is still at take-off (0.1 m/s).
+    """
+    return TaskSpec(
+        name="UTILFlight", n_uav=1, dt=0.01, duration=50.47,
+        trajectory=RecordedFlight(dataset="util-twr", log="twr-obs-log1", start=9.15, calibration="log00"),
+        anchors=((0.0, 0.0, 0.0),) * 8,
+        sensors=Sensors(imu_sigma=1.0, anchor_sigma=0.15, peers=PeerLinks(kind="none")),
+        filter=FilterSettings(init_pos_sigma=0.1, init_vel_sigma=0.1),
+    )
+
+
 #: registered ID → spec factory
 CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/Ideal-v0": ideal,
@@ -178,6 +203,7 @@ CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/Indoor-v0": indoor,
     **{f"swarmloc/HybridNoise{p}-v0": hybrid_noise(p) for p in (10, 30, 50)},
     "swarmloc/GradualFault-v0": gradual_fault,
+    "swarmloc/UTILFlight-v0": util_flight,
 }
 
 

@@ -233,6 +233,9 @@ class World:
     def __init__(self, spec: TaskSpec, batch_size: int):
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        if spec.trajectory.kind == "recorded":
+            raise ValueError(f"{spec.task_id} replays a recorded flight, it is not simulated; build its world "
+                             "with swarmloc.envs.make_world(spec, batch_size)")
         self.spec = spec
         self.batch_size = batch_size
         self.layout: ChannelLayout = build_layout(spec)

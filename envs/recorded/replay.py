@@ -1,0 +1,153 @@
+"""A recorded flight behind the world interface: ``RecordedWorld`` replays, it simulates nothing.
+
+``RecordedWorld(spec, B)`` exposes what ``LinkTrustCore`` and the bench runner use of
+``swarmloc.envs.world.World`` — ``spec``, ``batch_size``, ``layout``, ``anchors``,
+``landmarks``, ``buffers``, ``seeds``, ``steps``, ``x0``, ``times``, ``reset(seeds,
+mask)``, ``sense()`` — so the CEKF backbone and every estimator run on real data
+unchanged. The spec's trajectory is a ``RecordedFlight`` (which log, where step 0 is,
+which calibration); ``util_flight`` holds the rules that turn the log into steps.
+
+* **Anchors** come from the data folder (``anchors.csv``), never from the spec: the data
+  set has no licence, so the repository does not embed its survey. The spec holds one
+  placeholder per anchor (at the origin) so that the channel layout (L = 8) is known
+  without the data; ``world.anchors`` holds the surveyed positions.
+* **Determinism.** Every episode replays the same recording. The seed changes only the
+  initial prior: truth at step 0 plus N(0, init_pos_sigma²) per position axis and
+  N(0, init_vel_sigma²) per velocity axis, drawn from the same counter-based streams as
+  the simulated world.
+* **No data** → ``FileNotFoundError`` naming the source repository, commits, paths and
+  the import command (``find_util_data``).
+
+Batch layout as the simulated world: ``(B, N, ...)`` with N = 1 UAV; channel buffers
+``(B, N, L, ...)``; ranges in component 0 of the 3-vector measurement.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..channels import ChannelLayout, build_layout
+from ..rng import Stream, normal
+from ..specs import RecordedFlight, TaskSpec
+from ..world import SenseBuffers, validate_seeds
+from .util_flight import Recording, load_recording
+from .util_import import find_util_data
+
+_INIT = int(Stream.INIT)
+
+
+class RecordedWorld:
+    """B replays of one recorded flight (the world interface, no estimator).
+
+    Args:
+        spec: a task whose trajectory is a ``RecordedFlight``.
+        batch_size: B.
+        data_dir: the folder that contains ``util-twr/`` (default: ``$SWARMLOC_DATA``, else
+            ``../shared/data`` beside the checkout; see ``find_util_data``).
+
+    Raises:
+        ValueError: the spec is not a recorded flight, has several UAVs, landmarks, peers
+            or GPS, or its anchor count differs from the survey's; the window does not fit
+            in the log.
+        FileNotFoundError: the data is missing (the message says where it comes from and
+            how to import it).
+    """
+
+    def __init__(self, spec: TaskSpec, batch_size: int, data_dir: str | Path | None = None):
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        flight = spec.trajectory
+        if not isinstance(flight, RecordedFlight):
+            raise ValueError(f"RecordedWorld needs a spec with a recorded trajectory, got {flight.kind!r}")
+        if spec.n_uav != 1 or spec.landmarks or spec.sensors.gps_sigma or spec.n_peer_channels:
+            raise ValueError(f"{spec.task_id}: a recorded flight has one UAV with anchor channels only; got "
+                             f"n_uav={spec.n_uav}, {len(spec.landmarks)} landmarks, "
+                             f"{len(spec.sensors.gps_sigma)} GPS, {spec.n_peer_channels} peer channels")
+        folder = find_util_data(data_dir)
+        self.recording: Recording = load_recording(folder, flight.log, float(flight.start), spec.n_steps,
+                                                   float(spec.dt), flight.calibration)
+        n_a = len(self.recording.anchors)
+        if len(spec.anchors) != n_a:
+            raise ValueError(f"{spec.task_id} has {len(spec.anchors)} anchor channels but {folder / 'anchors.csv'} "
+                             f"surveys {n_a} anchors")
+        self.spec = spec
+        self.batch_size = batch_size
+        self.data_folder = folder
+        self.layout: ChannelLayout = build_layout(spec)
+        self.anchors = np.array(self.recording.anchors)
+        self.landmarks = np.zeros((0, 3))
+        n_b, n, n_l = batch_size, 1, n_a
+        self.buffers = SenseBuffers(
+            pos=np.zeros((n_b, n, 3)), vel=np.zeros((n_b, n, 3)), imu=np.zeros((n_b, n, 3)),
+            z=np.zeros((n_b, n, n_l, 3)), valid=np.zeros((n_b, n, n_l), dtype=np.bool_),
+            label=np.zeros((n_b, n, n_l), dtype=np.bool_), injected=np.zeros((n_b, n, n_l)),
+        )
+        self.seeds = np.zeros(n_b, dtype=np.int64)
+        self.x0 = np.zeros((n_b, n, 6))
+        self.steps = np.zeros(n_b, dtype=np.int64)
+
+    @property
+    def times(self) -> np.ndarray:
+        """``(B,)`` current episode time of each episode [s] (0 at step 0, i.e. at log time ``start``)."""
+        return self.steps * self.spec.dt
+
+    def reset(self, seeds: np.ndarray | list[int], mask: np.ndarray | None = None) -> np.ndarray:
+        """Start episodes at step 0; returns the initial prior means ``(B, N, 6)`` [p, v].
+
+        Args:
+            seeds: ``(B,)`` episode seeds (entries outside ``mask`` are ignored); a seed
+                only changes the initial-prior perturbation.
+            mask: optional ``(B,)`` bool: reset only these episodes; the others keep running.
+        """
+        seeds = validate_seeds(seeds)
+        if seeds.shape[0] != self.batch_size:
+            raise ValueError(f"expected {self.batch_size} seeds, got {seeds.shape[0]}")
+        if mask is None:
+            idx = np.arange(self.batch_size)
+        else:
+            mask = np.asarray(mask, dtype=bool)
+            if mask.shape != (self.batch_size,):
+                raise ValueError(f"mask must have shape ({self.batch_size},), got {mask.shape}")
+            idx = np.nonzero(mask)[0]
+        if idx.size == 0:
+            return self.x0
+        self.seeds[idx] = seeds[idx]
+        self.steps[idx] = 0
+        rec, f, buf = self.recording, self.spec.filter, self.buffers
+        buf.pos[idx, 0] = rec.pos[0]
+        buf.vel[idx, 0] = rec.vel[0]
+        buf.imu[idx] = 0.0
+        buf.z[idx] = 0.0
+        buf.valid[idx] = False
+        buf.label[idx] = False
+        buf.injected[idx] = 0.0
+        for b in idx:
+            seed = int(self.seeds[b])
+            for d in range(3):
+                # the same streams as the simulated world's initial prior (UAV 0)
+                self.x0[b, 0, d] = rec.pos[0, d] + f.init_pos_sigma * normal(seed, 0, _INIT, 10_000 + d)
+                self.x0[b, 0, 3 + d] = rec.vel[0, d] + f.init_vel_sigma * normal(seed, 0, _INIT, 10_003 + d)
+        return self.x0
+
+    def sense(self) -> SenseBuffers:
+        """Advance every episode by one step and fill the step buffers from the recording.
+
+        An episode past the end of the recording keeps reading its last step (the core
+        never scores it: it is done after ``spec.n_steps`` updates).
+        """
+        self.steps += 1
+        rec, buf = self.recording, self.buffers
+        k = np.minimum(self.steps, rec.n_steps)
+        buf.pos[:, 0] = rec.pos[k]
+        buf.vel[:, 0] = rec.vel[k]
+        buf.imu[:, 0] = rec.imu[k]
+        buf.z[:, 0, :, 0] = rec.z[k]
+        buf.valid[:, 0] = rec.valid[k]
+        buf.label[:, 0] = rec.label[k]
+        buf.injected[:, 0] = np.abs(rec.residual[k])
+        return buf
+
+
+__all__ = ["RecordedWorld"]
