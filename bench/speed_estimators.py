@@ -78,15 +78,16 @@ def _network() -> PFNNWeights:
 @dataclass
 class Timing:
     """Per-step wall times of one run [s]: the median (robust to the shared machine's
-    preemptions, which are not the filter's cost) and the mean."""
+    preemptions, which are not the filter's cost), the mean and the standard deviation."""
 
     median: float
     mean: float
+    std: float
 
 
 def _timing(per_step: list[float]) -> Timing:
     arr = np.asarray(per_step)
-    return Timing(median=float(np.median(arr)), mean=float(np.mean(arr)))
+    return Timing(median=float(np.median(arr)), mean=float(np.mean(arr)), std=float(np.std(arr)))
 
 
 def _best(timings: list[Timing]) -> Timing:
