@@ -132,7 +132,8 @@ class TaskFacts:
         return ChannelLayout(kind=self.kind, target=self.target, linked=self.linked, sigma=self.sigma)
 
     @classmethod
-    def from_spec(cls, spec: TaskSpec, layout: ChannelLayout, x0: np.ndarray, keys: np.ndarray) -> "TaskFacts":
+    def from_spec(cls, spec: TaskSpec, layout: ChannelLayout, x0: np.ndarray, keys: np.ndarray,
+                  anchors: np.ndarray | None = None) -> "TaskFacts":
         """Collect the public facts of ``spec`` for a batch of episodes.
 
         Args:
@@ -140,6 +141,9 @@ class TaskFacts:
             layout: its channel layout.
             x0: ``(B, N, 6)`` initial prior means.
             keys: ``(B,)`` per-episode random keys.
+            anchors: ``(A, 3)`` the world's anchor positions (pass ``world.anchors``: a
+                recorded task's survey comes from its data folder and its spec holds
+                placeholders); default: ``spec.anchors``.
 
         Returns:
             Frozen facts with read-only arrays.
@@ -149,11 +153,16 @@ class TaskFacts:
             raise ValueError(f"x0 must have shape (B, {spec.n_uav}, 6), got {x0.shape}")
         if np.shape(keys) != (x0.shape[0],):
             raise ValueError(f"keys must have shape ({x0.shape[0]},), got {np.shape(keys)}")
+        spec_anchors = np.asarray(spec.anchors, dtype=float).reshape(-1, 3)
+        anchors = spec_anchors if anchors is None else np.array(anchors, dtype=np.float64)
+        if anchors.shape != spec_anchors.shape:
+            raise ValueError(f"anchors must have shape {spec_anchors.shape} (one per anchor channel of "
+                             f"{spec.task_id}), got {anchors.shape}")
         return cls(
             task_id=spec.task_id, dt=float(spec.dt), n_steps=spec.n_steps, duration=spec.n_steps * spec.dt,
             n_uav=spec.n_uav, kind=_frozen_array(layout.kind), target=_frozen_array(layout.target),
             linked=_frozen_array(layout.linked), sigma=_frozen_array(layout.sigma),
-            anchors=_frozen_array(np.asarray(spec.anchors, dtype=float).reshape(-1, 3)),
+            anchors=_frozen_array(anchors),
             landmarks=_frozen_array(np.asarray(spec.landmarks, dtype=float).reshape(-1, 3)),
             imu_sigma=float(spec.sensors.imu_sigma), x0=_frozen_array(x0),
             init_pos_sigma=float(spec.filter.init_pos_sigma), init_vel_sigma=float(spec.filter.init_vel_sigma),
