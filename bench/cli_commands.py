@@ -6,7 +6,8 @@ a group and re-registers the group as a nested tyro union that dispatches on the
 config's type. Registered here:
 
 * ``swarmloc train pfnn`` — fit the PF-NN network offline (``bench/train_pfnn.py``);
-* ``swarmloc reproduce pfnn`` — pf-nn Tables 4 and 5 (``bench/reproduce_pfnn.py``).
+* ``swarmloc reproduce pfnn`` — pf-nn Tables 4 and 5 (``bench/reproduce_pfnn.py``);
+* ``swarmloc data import-util`` — import a UTIL flight log (``bench/data_cli.py``).
 
 Heavy modules are imported inside the handlers, so ``swarmloc --help`` stays fast.
 """
@@ -25,7 +26,8 @@ from swarmloc.bench.cli import COMMANDS, register_command
 #: group → subcommand name → (config type, handler)
 GROUPS: dict[str, dict[str, tuple[type, Callable[[Any], int | None]]]] = {}
 _GROUP_HELP = {"train": "Train a method (training seeds only).",
-               "reproduce": "Reproduce a paper's tables with our implementations."}
+               "reproduce": "Reproduce a paper's tables with our implementations.",
+               "data": "Import external data sets (e.g. the UTIL flight logs)."}
 
 
 def register_subcommand(group: str, name: str, config: type, handler: Callable[[Any], int | None],
@@ -111,3 +113,6 @@ register_subcommand("train", "pfnn", _train_pfnn_args(), run_train_pfnn,
                     "Fit the PF-NN weight-correction network offline on training seeds.")
 register_subcommand("reproduce", "pfnn", ReproducePfnnArgs, run_reproduce_pfnn,
                     "pf-nn Tables 4 and 5 on Indoor-v0.")
+
+# ``swarmloc data import-util`` (bench/data_cli.py) registers itself into the ``data`` group
+from swarmloc.bench import data_cli  # noqa: E402,F401
