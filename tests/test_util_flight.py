@@ -208,6 +208,26 @@ def test_fault_labels_flag_the_nlos_anchor():
 
 
 @needs_data
+def test_core_on_an_injected_world_with_partial_reset():
+    spec = short(0.5)
+    core = LinkTrustCore(spec, 2, world=RecordedWorld(spec, 2))
+    ones = np.ones((2, 1, 8))
+    core.reset([4, 5])
+    for _ in range(20):
+        core.step(ones)
+    core.reset([0, 9], mask=np.array([False, True]))  # episode 1 restarts, episode 0 keeps going
+    est = []
+    for _ in range(30):
+        est.append(core.step(ones).estimate[1].copy())
+    fresh = LinkTrustCore(spec, 1)
+    fresh.reset([9])
+    assert np.array_equal(np.array(est), np.array([fresh.step(ones[:1]).estimate[0].copy() for _ in range(30)]))
+    assert core._out.done[0] and core._out.steps[0] == spec.n_steps
+    with pytest.raises(ValueError, match="injected world"):
+        LinkTrustCore(spec, 3, world=RecordedWorld(spec, 2))
+
+
+@needs_data
 def test_gymnasium_env_runs_on_the_recording():
     env = gym.make(TASK, duration=0.3)
     obs, _ = env.reset(seed=1)
