@@ -43,7 +43,7 @@ from swarmloc.agents.protocols import (
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench import metrics as M
 from swarmloc.bench.results import MethodInfo, Results, SuiteInfo, make_results, write_results
-from swarmloc.bench.suites import Suite
+from swarmloc.bench.suites import Suite, require_data
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.observation import build_observation, kind_one_hot
 from swarmloc.envs.reward import standard_reward
@@ -52,6 +52,15 @@ from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World, validate_seeds
 
 MAX_WORKERS = 64
+
+
+def make_world(spec: TaskSpec, batch_size: int) -> Any:
+    """The task's world: ``swarmloc.envs.worlds.make_world`` (simulated or recorded) where available."""
+    try:
+        from swarmloc.envs.worlds import make_world as _make_world
+    except ImportError:  # an envs without recorded worlds: every world is simulated
+        return World(spec, batch_size)
+    return _make_world(spec, batch_size)
 
 
 # --------------------------------------------------------------------------- traces
@@ -148,7 +157,8 @@ class _Recorder:
     """Collects what the metrics need while B episodes of one task run.
 
     Args:
-        spec: the task; seeds: ``(B,)``; schedule: the world's fault schedule.
+        spec: the task; seeds: ``(B,)``; schedule: the world's fault schedule (None for a
+            world without one, e.g. a recorded flight).
         with_trust: the method exposes the trust it applied.
         with_flops: the method reports FLOPs.
         trace: keep a per-step record of episode 0.
@@ -204,17 +214,18 @@ class _Recorder:
     def _healthy(self, b: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Healthy UAVs and the steps they are scored on, or None where undefined."""
         s, steps_ok = self.spec, self.scored_steps
+        sched = self.schedule
         if s.scoring.healthy_nodes:
             healthy = np.zeros(s.n_uav, dtype=bool)
             healthy[list(s.scoring.healthy_nodes)] = True
             if s.scoring.fault_window is not None:
                 return healthy, M.window_steps(self.times, s.scoring.fault_window) & steps_ok
-            span = self.schedule.imu_fault_span()[b]
+            span = sched.imu_fault_span()[b] if sched is not None else np.full(2, np.nan)
             window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
             return healthy, (M.window_steps(self.times, window) if window else steps_ok) & steps_ok
-        if s.faults.imu_cascade_random is not None:
-            healthy = ~self.schedule.faulty_nodes[b]
-            span = self.schedule.imu_fault_span()[b]
+        if s.faults.imu_cascade_random is not None and sched is not None:
+            healthy = ~sched.faulty_nodes[b]
+            span = sched.imu_fault_span()[b]
             return healthy, M.window_steps(self.times, (float(span[0]), float(span[1]))) & steps_ok
         return None
 
@@ -253,7 +264,7 @@ class _Recorder:
         if self.trace is None:
             return None
         window = self.spec.scoring.fault_window
-        if window is None and self.spec.faults.imu_cascade_random is not None:
+        if window is None and self.spec.faults.imu_cascade_random is not None and self.schedule is not None:
             window = tuple(self.schedule.imu_fault_span()[0])
         return Trace(method=method, task=self.spec.task_id, seed=int(self.seeds[0]), times=self.times.copy(),
                      kind=np.asarray(layout_kind), scored=self.nodes.copy(),
@@ -281,7 +292,7 @@ def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, tra
     one_hot = kind_one_hot(layout.kind)
     obs = None
     fpc = float(getattr(policy, "flops_per_channel", 0.0))
-    rec = _Recorder(spec, seeds, core.world.schedule, layout.n_channels, True, True, trace)
+    rec = _Recorder(spec, seeds, getattr(core.world, "schedule", None), layout.n_channels, True, True, trace)
     for k in range(spec.n_steps):
         obs = build_observation(cs, one_hot, out=obs)
         inp = TrustInput.view(obs, cs.resid, cs.pred, cs.nis, cs.applied, cs.jerk, cs.valid,
@@ -321,9 +332,9 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
     """Run a Track B estimator on B episodes through ``World``."""
     est = loaded.method
     n_b = len(seeds)
-    world = World(spec, n_b)
+    world = make_world(spec, n_b)
     x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
+    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds), anchors=world.anchors)
     est.reset(facts, facts.x0)
     shape = (n_b, spec.n_uav, world.layout.n_channels)
     rec: _Recorder | None = None
@@ -335,7 +346,7 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
             est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy())))
         out = _check_output(est.step(meas), loaded.name, shape)
         if rec is None:
-            rec = _Recorder(spec, seeds, world.schedule, shape[2], out.weights is not None, out.flops is not None,
+            rec = _Recorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
                             trace)
         weights = None if out.weights is None else np.clip(np.asarray(out.weights, dtype=np.float64), 0.0, 1.0)
         if weights is not None and previous is None:
@@ -567,6 +578,7 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
 
     weights = {m: (str(w) if w is not None else None) for m, w in (weights or {}).items()}
     loaded = {m: load_method(m, weights.get(m)) for m in methods}  # fail fast, before any work
+    require_data(suite)  # a recorded task whose data is not imported here: say so before any work
     jobs = sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t))))
     outcomes: dict[str, TaskOutcome] = {}
     label = methods[0] if len(methods) == 1 else f"{len(methods)} methods"

@@ -15,9 +15,19 @@ use dev seeds, never test seeds. Suites:
 * ``standard-v0`` — the leaderboard suite: the 17 tasks of v0 (:data:`STANDARD_V0_TASKS`,
   frozen: a task added later joins in ``standard-v1``), 32 test seeds each
   (1_000_000 … 1_000_031). Its SHA-256 is pinned in the tests.
-* ``quick`` — every task in the catalogue, the first 4 test seeds (a subset of
-  ``standard-v0``'s episodes); for demos and smoke tests.
-* ``dev`` — every task in the catalogue, 8 dev seeds (2_000_000 … 2_000_007); for tuning.
+* ``quick`` — every simulated task in the catalogue, the first 4 test seeds (on the
+  ``standard-v0`` tasks a subset of its episodes); for demos and smoke tests.
+* ``dev`` — every simulated task in the catalogue, 8 dev seeds (2_000_000 … 2_000_007);
+  for tuning.
+
+* ``real-v0`` — real flights replayed from imported data (:data:`REAL_V0_TASKS`: the UTIL
+  Crazyflie flight ``UTILFlight-v0``), 4 test seeds each. Every seed replays the same
+  recording (the seed moves only the initial prior). It runs only where the data is
+  imported (``SWARMLOC_DATA``); :func:`require_data` says what is missing and how to
+  import it.
+
+Tasks that replay recorded flights (trajectory kind ``recorded``) need a data set the
+repository does not ship, so the catalogue-wide suites leave them out.
 
 The hash of a suite is :func:`swarmloc.bench.results.suite_sha256` of its episode list
 (the sorted (task, seed) pairs as compact JSON), the same value a results file records.
@@ -29,7 +39,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 from swarmloc.bench.results import suite_sha256
-from swarmloc.envs.tasks import CATALOGUE
+from swarmloc.envs.tasks import CATALOGUE, get_spec
 
 TRAINING_SEED_LIMIT = 1_000_000
 TEST_SEED_START = 1_000_000
@@ -97,17 +107,64 @@ def _standard_v0() -> Suite:
                  "leaderboard suite: 17 tasks × 32 test seeds (1_000_000 … 1_000_031)")
 
 
+def simulated_tasks() -> list[str]:
+    """Catalogue tasks that run without external data (not recorded-flight replays)."""
+    return [t for t in CATALOGUE if get_spec(t).trajectory.kind != "recorded"]
+
+
 def _quick() -> Suite:
-    return Suite("quick", "0", _episodes(CATALOGUE, TEST_SEED_START, 4),
+    return Suite("quick", "0", _episodes(simulated_tasks(), TEST_SEED_START, 4),
                  "every task × the first 4 test seeds (demo, smoke tests)")
 
 
 def _dev() -> Suite:
-    return Suite("dev", "0", _episodes(CATALOGUE, DEV_SEED_START, 8),
+    return Suite("dev", "0", _episodes(simulated_tasks(), DEV_SEED_START, 8),
                  "every task × 8 dev seeds (2_000_000 … 2_000_007), for tuning")
 
 
-SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev}
+#: the tasks of ``real-v0`` (frozen with the suite)
+REAL_V0_TASKS: tuple[str, ...] = ("swarmloc/UTILFlight-v0",)
+
+
+def _real_v0() -> Suite:
+    return Suite("real-v0", "0", _episodes(REAL_V0_TASKS, TEST_SEED_START, 4),
+                 "real flights replayed from imported data (UTIL twr-obs-log1) × 4 test seeds; needs SWARMLOC_DATA")
+
+
+SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0}
+
+
+def missing_data(suite: Suite) -> dict[str, str]:
+    """Tasks of ``suite`` whose external data is absent here, with the reason (empty: it runs here).
+
+    Args:
+        suite: the suite.
+
+    Returns:
+        task ID → message naming where the data comes from and the command that imports it.
+    """
+    from swarmloc.envs.worlds import data_missing
+
+    found = {}
+    for task in suite.tasks:
+        why = data_missing(get_spec(task))
+        if why is not None:
+            found[task] = why
+    return found
+
+
+def require_data(suite: Suite) -> None:
+    """Refuse to run a suite whose external data is absent here.
+
+    Raises:
+        FileNotFoundError: naming the suite, the tasks, where the data comes from and how to
+            import it.
+    """
+    missing = missing_data(suite)
+    if missing:
+        first = next(iter(missing.values()))
+        raise FileNotFoundError(f"suite {suite.name!r} needs data that is not here (task(s) "
+                                f"{', '.join(missing)}):\n{first}")
 
 
 def suite_names() -> list[str]:
