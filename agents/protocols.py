@@ -95,6 +95,8 @@ class TaskFacts:
         init_pos_sigma, init_vel_sigma: std of the initial prior [m], [m/s].
         alpha_th, alpha_min: the CEKF's activity threshold and trust floor.
         keys: ``(B,)`` per-episode random keys (see :func:`episode_keys`).
+        velocity_sigma: nominal visual-odometry velocity std per axis [m/s], None when the
+            task has no VO sensor (then ``Measurements.velocity`` is None).
     """
 
     task_id: str
@@ -115,6 +117,7 @@ class TaskFacts:
     alpha_th: float
     alpha_min: float
     keys: np.ndarray
+    velocity_sigma: float | None = None
 
     @property
     def batch_size(self) -> int:
@@ -168,6 +171,7 @@ class TaskFacts:
             init_pos_sigma=float(spec.filter.init_pos_sigma), init_vel_sigma=float(spec.filter.init_vel_sigma),
             alpha_th=float(spec.filter.alpha_th), alpha_min=float(spec.filter.alpha_min),
             keys=_frozen_array(np.array(keys, dtype=np.int64)),
+            velocity_sigma=None if spec.sensors.velocity_sigma is None else float(spec.sensors.velocity_sigma),
         )
 
 
@@ -183,6 +187,8 @@ class Measurements:
         valid: ``(B, N, L)`` bool, measurement present.
         t: time of the step [s] (= step·dt).
         step: step index k, 1-based (the k-th filter step of the episode).
+        velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (world frame), or None when
+            the task has no VO sensor (``TaskFacts.velocity_sigma`` is None).
     """
 
     imu: np.ndarray
@@ -190,12 +196,15 @@ class Measurements:
     valid: np.ndarray
     t: float
     step: int
+    velocity: np.ndarray | None = None
 
     @classmethod
-    def capture(cls, imu: np.ndarray, z: np.ndarray, valid: np.ndarray, t: float, step: int) -> "Measurements":
-        """Snapshot the given buffers into read-only copies."""
+    def capture(cls, imu: np.ndarray, z: np.ndarray, valid: np.ndarray, t: float, step: int,
+                velocity: np.ndarray | None = None) -> "Measurements":
+        """Snapshot the given buffers into read-only copies (``velocity``: the world's VO buffer, if any)."""
         return cls(imu=_frozen_array(imu.copy()), z=_frozen_array(z.copy()), valid=_frozen_array(valid.copy()),
-                   t=float(t), step=int(step))
+                   t=float(t), step=int(step),
+                   velocity=None if velocity is None else _frozen_array(np.array(velocity, dtype=np.float64)))
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,6 +46,7 @@ class Stream(IntEnum):
     SCHEDULE = 13
     POLICY = 14
     ESTIMATOR = 15
+    VELOCITY = 16
 
 
 @njit(cache=True, inline="always")

@@ -142,6 +142,10 @@ class Sensors(Frozen):
     camera_sigma: PositiveFloat = 0.15
     camera_max_range: PositiveFloat = 10.0
     gps_sigma: tuple[PositiveFloat, ...] = Field(default=(), description="per-UAV GPS std [m]; empty = no GPS")
+    velocity_sigma: PositiveFloat | None = Field(
+        default=None, description="visual odometry: world-frame velocity std per axis [m/s]; None = no VO")
+    velocity_bias_sigma: NonNegFloat = Field(
+        default=0.0, description="constant per-episode VO velocity bias std per axis [m/s] (drift)")
 
 
 # --------------------------------------------------------------------------- faults
@@ -253,6 +257,21 @@ class HybridNoise(Frozen):
     dof_high: int = Field(default=50, ge=1)
 
 
+class UwbOutage(Frozen):
+    """UWB loss windows: no range of the chosen kinds arrives inside a window (dtvirm §4.4 (1))."""
+
+    windows: tuple[tuple[float, float], ...] = ((20.0, 25.0),)
+    nodes: tuple[int, ...] = Field(default=(), description="receiving UAVs; empty = all")
+    targets: tuple[Literal["anchor", "peer"], ...] = ("peer",)
+
+    @model_validator(mode="after")
+    def _windows(self) -> "UwbOutage":
+        for t0, t1 in self.windows:
+            if not 0.0 <= t0 < t1:
+                raise ValueError(f"UWB outage window ({t0}, {t1}) must satisfy 0 <= start < end")
+        return self
+
+
 class Faults(Frozen):
     """Every fault of a task; all are seeded and composable."""
 
@@ -263,6 +282,7 @@ class Faults(Frozen):
     imu_cascade_random: ImuCascadeRandom | None = None
     vision_outage: VisionOutage | None = None
     packet_loss: Probability = 0.0
+    uwb_outage: UwbOutage | None = None
     gps_drifts: tuple[GpsDrift, ...] = ()
     hybrid_noise: HybridNoise | None = None
 
@@ -286,6 +306,10 @@ class Scoring(Frozen):
     healthy_nodes: tuple[int, ...] = Field(default=(), description="nodes for healthy-node RMSE; empty = not defined")
     fault_window: tuple[float, float] | None = None
     start: NonNegFloat = 0.0
+    align_first_seconds: NonNegFloat = Field(
+        default=0.0,
+        description="score after the yaw + 3-D translation that best aligns the estimates of the first this-many "
+                    "seconds of the scored interval with the truth (anchor-free tasks); 0 = no alignment")
 
 
 class TaskSpec(Frozen):
@@ -317,6 +341,8 @@ class TaskSpec(Frozen):
         node_lists += [("faults.imu_cascades.nodes", c.nodes) for c in f.imu_cascades]
         node_lists += [("faults.nlos_steps.nodes", s.nodes) for s in f.nlos_steps]
         node_lists += [("faults.gps_drifts.nodes", d.nodes) for d in f.gps_drifts]
+        if f.uwb_outage is not None:
+            node_lists.append(("faults.uwb_outage.nodes", f.uwb_outage.nodes))
         for field, nodes in node_lists:
             bad = [i for i in nodes if not 0 <= i < n]
             if bad:
@@ -329,6 +355,12 @@ class TaskSpec(Frozen):
             raise ValueError(f"faults.imu_cascade_random.n_faulty={f.imu_cascade_random.n_faulty} must be < n_uav={n}")
         if (f.gps_drifts or f.hybrid_noise) and not gps:
             raise ValueError("GPS faults need sensors.gps_sigma for every UAV")
+        if self.sensors.velocity_bias_sigma > 0 and self.sensors.velocity_sigma is None:
+            raise ValueError("sensors.velocity_bias_sigma needs sensors.velocity_sigma (a VO sensor)")
+        if self.scoring.align_first_seconds > 0 and not (
+                self.dt <= self.scoring.align_first_seconds <= self.duration - self.scoring.start):
+            raise ValueError(f"scoring.align_first_seconds={self.scoring.align_first_seconds} must be 0 or in "
+                             f"[dt, duration − scoring.start] = [{self.dt}, {self.duration - self.scoring.start}]")
         if f.vision_outage is not None and not self.landmarks:
             raise ValueError("faults.vision_outage needs landmarks")
         if not (self.anchors or self.landmarks or gps or self.sensors.peers.kind != "none"):

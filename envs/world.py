@@ -50,6 +50,9 @@ class SenseBuffers:
         valid: ``(B, N, L)`` measurement present.
         label: ``(B, N, L)`` ground-truth fault label.
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
+        velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (world frame, per-axis noise
+            ``sensors.velocity_sigma`` plus a constant per-episode bias); None when the task
+            has no VO sensor.
     """
 
     pos: np.ndarray
@@ -59,6 +62,7 @@ class SenseBuffers:
     valid: np.ndarray
     label: np.ndarray
     injected: np.ndarray
+    velocity: np.ndarray | None = None
 
 
 @njit(cache=True, inline="always")
@@ -207,6 +211,26 @@ def _node_faulty(b, j, t, imu_time, imu_nodes) -> bool:
 
 
 @njit(cache=True, parallel=True)
+def _velocity_kernel(steps, seeds, sigma, vel, bias, out):
+    """Visual odometry: v_vo = v + b + σ n, n ~ N(0, 1) keyed by (seed, step, VELOCITY, uav·3 + axis)."""
+    n_b, n = vel.shape[0], vel.shape[1]
+    for b in prange(n_b):
+        for i in range(n):
+            for d in range(3):
+                out[b, i, d] = vel[b, i, d] + bias[b, i, d] + sigma * normal(seeds[b], steps[b], Stream.VELOCITY,
+                                                                             i * 3 + d)
+
+
+@njit(cache=True)
+def _velocity_bias_kernel(seeds, sigma, out):
+    """Per-episode constant VO bias b ~ N(0, σ²) per UAV and axis (drawn at step 0)."""
+    for b in range(out.shape[0]):
+        for i in range(out.shape[1]):
+            for d in range(3):
+                out[b, i, d] = sigma * normal(seeds[b], 0, Stream.VELOCITY, 1_000_000 + i * 3 + d)
+
+
+@njit(cache=True, parallel=True)
 def _reset_kernel(seeds, traj_kind, traj_prm, imu_bias_sigma, init_pos_sigma, init_vel_sigma,
                   pos, vel, imu_const_bias, x0):
     n_b, n = pos.shape[0], pos.shape[1]
@@ -256,6 +280,19 @@ class World:
         self._gm_bias = np.zeros((n_b, n, n_l))
         self._gm_left = np.zeros((n_b, n, n_l))
         self.steps = np.zeros(n_b, dtype=np.int64)
+        # visual odometry and UWB outages act after the sensing kernel (additive; kernel unchanged)
+        vo = spec.sensors.velocity_sigma
+        self.velocity_bias = np.zeros((n_b, n, 3))
+        if vo is not None:
+            self.buffers.velocity = np.zeros((n_b, n, 3))
+        out = spec.faults.uwb_outage
+        self._outage_windows = np.asarray(out.windows if out is not None else (), dtype=float).reshape(-1, 2)
+        self._outage_mask = np.zeros((n, n_l), dtype=np.bool_)
+        if out is not None:
+            kinds = [ANCHOR] * ("anchor" in out.targets) + [PEER, PEER_REL] * ("peer" in out.targets)
+            rows = np.zeros(n, dtype=np.bool_)
+            rows[list(out.nodes) if out.nodes else slice(None)] = True
+            self._outage_mask = np.isin(self.layout.kind, kinds) & rows[:, None]
 
     @property
     def times(self) -> np.ndarray:
@@ -306,6 +343,11 @@ class World:
         buf.pos[idx], buf.vel[idx], self.imu_const_bias[idx], self.x0[idx] = pos, vel, bias, x0
         buf.valid[idx] = False
         buf.label[idx] = False
+        if buf.velocity is not None:
+            bias = np.zeros((idx.size, self.spec.n_uav, 3))
+            _velocity_bias_kernel(self.seeds[idx], self.spec.sensors.velocity_bias_sigma, bias)
+            self.velocity_bias[idx] = bias
+            buf.velocity[idx] = buf.vel[idx] + bias
         return self.x0
 
     def sense(self) -> SenseBuffers:
@@ -322,4 +364,16 @@ class World:
             self._gm_bias, self._gm_left,
             buf.pos, buf.vel, buf.imu, buf.z, buf.valid, buf.label, buf.injected,
         )
+        if buf.velocity is not None:
+            _velocity_kernel(self.steps, self.seeds, float(s.sensors.velocity_sigma), buf.vel, self.velocity_bias,
+                             buf.velocity)
+        if self._outage_windows.size:
+            # same half-open test as the kernel's windows: start <= k·dt < end
+            t = self.steps * s.dt
+            w = self._outage_windows
+            inside = ((t[:, None] >= w[None, :, 0]) & (t[:, None] < w[None, :, 1])).any(axis=1)
+            if inside.any():
+                lost = inside[:, None, None] & self._outage_mask[None]
+                buf.valid &= ~lost
+                buf.label &= ~lost
         return buf
