@@ -143,10 +143,12 @@ def _episode(variant: str, seeds: list[int], poison_truth: bool = False, duratio
     for k in range(1, spec.n_steps + 1):
         buf = world.sense()
         meas = Measurements.capture(buf.imu, buf.z, buf.valid, k * spec.dt, k)
+        saved = buf.pos.copy(), buf.vel.copy()
         if poison_truth:  # the estimator must not be able to reach the truth buffers
             buf.pos[:] = np.nan
             buf.vel[:] = np.nan
         res = est.step(meas)
+        buf.pos[:], buf.vel[:] = saved  # the world needs them for its next step
         assert np.allclose(est.mode_probabilities.sum(axis=-1), 1.0)
         out.append(res.positions.copy())
     return np.array(out)
