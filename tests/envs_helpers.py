@@ -1,0 +1,28 @@
+"""Helpers shared by the tests/test_envs_*.py files."""
+
+from __future__ import annotations
+
+import pydantic
+import pytest
+
+from swarmloc.envs.specs import Scoring
+from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.worlds import data_missing
+
+
+def short(task_id: str, steps: int) -> dict:
+    """Overrides that make ``task_id`` last ``steps`` updates (scoring reset if it no longer fits)."""
+    overrides = {"duration": steps * get_spec(task_id).dt}
+    try:
+        get_spec(task_id, **overrides)
+    except pydantic.ValidationError:
+        overrides["scoring"] = Scoring().model_dump()
+        get_spec(task_id, **overrides)
+    return overrides
+
+
+def skip_without_data(task_id: str) -> None:
+    """Skip a test of a recorded task whose data set is not here."""
+    why = data_missing(get_spec(task_id))
+    if why:
+        pytest.skip(f"{task_id}: {why.splitlines()[0]}")
