@@ -173,7 +173,8 @@ def run_tasks(cfg: TasksCommand) -> int:
     from swarmloc.envs.tasks import CATALOGUE, get_spec
 
     table = Table(title="swarmloc tasks")
-    for name in ("ID", "UAVs", "channels/UAV", "duration [s]", "dt [s]", "faults", "scored"):
+    table.add_column("ID", no_wrap=True)
+    for name in ("UAVs", "channels/UAV", "duration [s]", "dt [s]", "faults", "scored"):
         table.add_column(name)
     for task_id in CATALOGUE:
         s = get_spec(task_id)

@@ -228,18 +228,30 @@ class ChannelStats:
         z = lambda: np.zeros(batch_size)  # noqa: E731
         self.n_valid, self.abs_delta, self.alpha_sum, self.alpha_sq = z(), z(), z(), z()
         self.n_label, self.n_detected = z(), z()
+        # variance sums are taken around a per-episode shift (the first step's mean trust),
+        # so a constant trust gives exactly 0 and no cancellation creeps in
+        self.shift = np.full(batch_size, np.nan)
 
     def add(self, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray, label: np.ndarray) -> None:
         """Add one step (``(B, N, L)`` arrays) of the scored interval."""
-        m = valid[:, self.nodes]
-        a = applied[:, self.nodes]
-        lab = label[:, self.nodes] & m
-        self.n_valid += m.sum(axis=(1, 2))
-        self.abs_delta += (np.abs(a - previous[:, self.nodes]) * m).sum(axis=(1, 2))
-        self.alpha_sum += (a * m).sum(axis=(1, 2))
-        self.alpha_sq += (a * a * m).sum(axis=(1, 2))
-        self.n_label += lab.sum(axis=(1, 2))
-        self.n_detected += ((a < DETECTION_TRUST) & lab).sum(axis=(1, 2))
+        n_b = applied.shape[0]
+        # rows (B, N_scored·L), reduced along the contiguous last axis: each episode's sum
+        # is computed the same way whatever B is (bit-identical alone or batched)
+        m = valid[:, self.nodes].reshape(n_b, -1)
+        a = applied[:, self.nodes].reshape(n_b, -1)
+        p = previous[:, self.nodes].reshape(n_b, -1)
+        lab = label[:, self.nodes].reshape(n_b, -1) & m
+        count = m.sum(axis=1)
+        first = np.isnan(self.shift) & (count > 0)
+        if first.any():
+            self.shift[first] = (a * m).sum(axis=1)[first] / count[first]
+        d = a - np.nan_to_num(self.shift)[:, None]
+        self.n_valid += count
+        self.abs_delta += (np.abs(a - p) * m).sum(axis=1)
+        self.alpha_sum += (d * m).sum(axis=1)
+        self.alpha_sq += (d * d * m).sum(axis=1)
+        self.n_label += lab.sum(axis=1)
+        self.n_detected += ((a < DETECTION_TRUST) & lab).sum(axis=1)
 
     def jitter(self, b: int) -> float | None:
         """Episode b's jitter (None without valid channel-steps)."""
@@ -251,7 +263,7 @@ class ChannelStats:
         if n <= 0:
             return None
         mean = self.alpha_sum[b] / n
-        # Var = E[α²] − E[α]² (α ∈ [0, 1]: no catastrophic cancellation at float64)
+        # Var = E[d²] − E[d]² with d = α − shift (shift-invariant)
         return float(max(self.alpha_sq[b] / n - mean * mean, 0.0))
 
     def anomaly_detection_rate(self, b: int) -> float | None:

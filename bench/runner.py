@@ -133,6 +133,9 @@ def write_traces(path: str | os.PathLike[str], traces: Sequence[Trace]) -> Path:
         arrays.update(tr.to_arrays())
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
+        umask = os.umask(0)  # mkstemp creates 0600; use what a plain open() would
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         with os.fdopen(fd, "wb") as handle:
             np.savez_compressed(handle, **arrays)
             handle.flush()

@@ -1,0 +1,123 @@
+"""Each metric against a hand-computed case; the streaming trust sums equal the pure functions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from swarmloc.bench import metrics as M
+
+ERRORS = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
+
+
+def test_position_errors():
+    est = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    truth = np.array([[3.0, 4.0, 0.0], [1.0, 1.0, 3.0]])
+    np.testing.assert_allclose(M.position_errors(est, truth), [5.0, 2.0])
+
+
+def test_error_statistics_hand_computed():
+    # rmse = sqrt((0 + 1 + 4 + 9 + 16) / 5) = sqrt(6)
+    assert M.rmse(ERRORS) == pytest.approx(math.sqrt(6.0))
+    assert M.mean_error(ERRORS) == pytest.approx(2.0)
+    assert M.median_error(ERRORS) == pytest.approx(2.0)
+    assert M.max_error(ERRORS) == pytest.approx(4.0)
+    # 90th percentile, linear: position 0.9·4 = 3.6 → 3 + 0.6·(4 − 3)
+    assert M.cep90(ERRORS) == pytest.approx(3.6)
+    # any shape is flattened
+    assert M.rmse(ERRORS.reshape(5, 1)) == pytest.approx(math.sqrt(6.0))
+
+
+def test_empty_errors_rejected():
+    with pytest.raises(ValueError, match="no error samples"):
+        M.rmse(np.zeros((0, 3)))
+
+
+def test_window_steps_half_open_and_rounding_safe():
+    times = 0.1 * np.arange(1, 11)  # 0.1 … 1.0 with float rounding
+    mask = M.window_steps(times, (0.3, 0.6))
+    assert mask.tolist() == [False, False, True, True, True, False, False, False, False, False]
+    assert not M.window_steps(times, None).any()
+
+
+def test_fault_rmse():
+    errors = np.array([[1.0, 1.0], [3.0, 4.0], [0.0, 0.0]])  # (T=3, N=2)
+    # steps 1 only: sqrt((9 + 16) / 2)
+    assert M.fault_rmse(errors, np.array([False, True, False])) == pytest.approx(math.sqrt(12.5))
+    assert M.fault_rmse(errors, np.zeros(3, dtype=bool)) is None
+
+
+def test_healthy_rmse():
+    errors = np.array([[1.0, 10.0, 3.0], [1.0, 20.0, 3.0]])  # (T=2, N=3); node 1 faulty
+    healthy = np.array([True, False, True])
+    # sqrt((1 + 9 + 1 + 9) / 4) = sqrt(5)
+    assert M.healthy_rmse(errors, healthy, np.array([True, True])) == pytest.approx(math.sqrt(5.0))
+    assert M.healthy_rmse(errors, healthy, np.array([True, False])) == pytest.approx(math.sqrt(5.0))
+    assert M.healthy_rmse(errors, np.zeros(3, dtype=bool), np.array([True, True])) is None
+
+
+def test_diverged():
+    assert M.diverged(np.array([1.0, 9.9])) == 0.0
+    assert M.diverged(np.array([1.0, 10.5])) == 1.0
+    assert M.diverged(np.array([1.0, np.inf])) == 1.0
+
+
+def test_jitter_weight_var_detection():
+    applied = np.array([[1.0, 0.5], [0.5, 0.5]])
+    previous = np.array([[1.0, 1.0], [1.0, 0.5]])
+    valid = np.ones((2, 2), dtype=bool)
+    # |Δα| = 0, 0.5, 0.5, 0 → mean 0.25
+    assert M.jitter(applied, previous, valid) == pytest.approx(0.25)
+    # only the first row valid: (0 + 0.5) / 2
+    assert M.jitter(applied, previous, np.array([[True, True], [False, False]])) == pytest.approx(0.25)
+    assert M.jitter(applied, previous, np.zeros((2, 2), dtype=bool)) is None
+    # values 1, .5, .5, .5: mean .625, var = (.375² + 3·.125²) / 4
+    assert M.weight_var(applied, valid) == pytest.approx((0.375**2 + 3 * 0.125**2) / 4)
+    assert M.weight_var(np.array([0.0, 1.0]), np.array([True, True])) == pytest.approx(0.25)
+    # labelled: α = 0.01 (detected), 0.9 (missed); the unlabelled 0.3 does not count
+    rate = M.anomaly_detection_rate(np.array([0.01, 0.9, 0.3]), np.array([True, True, False]))
+    assert rate == pytest.approx(0.5)
+    assert M.anomaly_detection_rate(np.array([0.4, 0.5]), np.array([True, True])) == pytest.approx(0.5)
+    assert M.anomaly_detection_rate(np.array([0.1]), np.array([False])) is None
+
+
+def test_team_return_and_normalized_score():
+    assert M.team_return(np.array([0.5, 0.25, -1.0])) == pytest.approx(-0.25)
+    # (2 − 1.5) / (2 − 1)
+    assert M.normalized_score(1.5, 2.0, 1.0) == pytest.approx(0.5)
+    assert M.normalized_score(2.0, 2.0, 1.0) == pytest.approx(0.0)
+    assert M.normalized_score(1.0, 2.0, 1.0) == pytest.approx(1.0)
+    assert M.normalized_score(3.0, 2.0, 1.0) == pytest.approx(-1.0)
+    # oracle no better than uniform (by less than 1 mm): undefined
+    assert M.normalized_score(1.0, 2.0, 2.0) is None
+    assert M.normalized_score(1.0, 2.0, 1.9995) is None
+
+
+def test_channel_stats_equal_pure_functions():
+    rng = np.random.default_rng(0)
+    n_t, n_b, n, n_l = 6, 3, 4, 5
+    applied = rng.uniform(size=(n_t, n_b, n, n_l))
+    previous = np.concatenate([np.ones((1, n_b, n, n_l)), applied[:-1]])
+    valid = rng.uniform(size=applied.shape) < 0.7
+    label = (rng.uniform(size=applied.shape) < 0.3) & valid
+    nodes = np.array([True, False, True, True])
+    stats = M.ChannelStats(n_b, nodes)
+    for k in range(n_t):
+        stats.add(applied[k], previous[k], valid[k], label[k])
+    for b in range(n_b):
+        a, p = applied[:, b][:, nodes], previous[:, b][:, nodes]
+        v, lab = valid[:, b][:, nodes], label[:, b][:, nodes]
+        assert stats.jitter(b) == pytest.approx(M.jitter(a, p, v), rel=1e-12)
+        assert stats.weight_var(b) == pytest.approx(M.weight_var(a, v), rel=1e-9)
+        assert stats.anomaly_detection_rate(b) == pytest.approx(M.anomaly_detection_rate(a, lab), rel=1e-12)
+
+
+def test_channel_stats_constant_trust_has_zero_variance():
+    stats = M.ChannelStats(1, np.array([True, True]))
+    a = np.full((1, 2, 3), 0.6)
+    for _ in range(50):
+        stats.add(a, a, np.ones((1, 2, 3), dtype=bool), np.zeros((1, 2, 3), dtype=bool))
+    assert stats.weight_var(0) == pytest.approx(0.0, abs=1e-20)
+    assert stats.anomaly_detection_rate(0) is None

@@ -1,0 +1,128 @@
+"""The runner: batching invariance, results round trip, parallel == serial, bad methods rejected."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmloc.agents.dead_reckoning import DeadReckoning
+from swarmloc.agents.protocols import EstimatorOutput, Measurements
+from swarmloc.agents.registry import LoadedMethod, load_method
+from swarmloc.bench.results import METRIC_NAMES, load_results
+from swarmloc.bench.runner import (
+    evaluate,
+    evaluate_methods,
+    evaluate_task,
+    read_traces,
+    rollout,
+    run_episodes,
+    traces_path,
+)
+from swarmloc.bench.suites import Suite
+from swarmloc.envs.tasks import get_spec
+
+EPISODES = [("swarmloc/NLOS-v0", 1_000_001), ("swarmloc/CascadedFaultRandom-v0", 1_000_002),
+            ("NLOS-v0", 1_000_000), ("swarmloc/CascadedFaultRandom-v0", 1_000_000)]
+
+
+@pytest.mark.parametrize("method", ["random", "chi2-gate"])
+def test_run_episodes_single_equals_batched(method):
+    batched = run_episodes(method, EPISODES)
+    assert [(e["task"], e["seed"]) for e in batched] == [
+        ("swarmloc/NLOS-v0", 1_000_001), ("swarmloc/CascadedFaultRandom-v0", 1_000_002),
+        ("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/CascadedFaultRandom-v0", 1_000_000)]
+    for episode, expected in zip(EPISODES, batched):
+        alone = run_episodes(method, [episode])[0]
+        assert alone == expected
+    assert set(batched[0]["metrics"]) == set(METRIC_NAMES)
+
+
+def test_metric_definitions_per_task():
+    out = evaluate_task(["uniform"], get_spec("swarmloc/Ideal-v0", duration=3.0), [1_000_000]).episodes["uniform"]
+    m = out[0]
+    assert m["fault_rmse"] is None and m["healthy_rmse"] is None and m["anomaly_detection_rate"] is None
+    assert m["normalized_score"] is None  # no labels: oracle == uniform
+    assert m["jitter"] == 0.0 and m["diverged"] == 0.0
+    assert m["delay_ms"] > 0 and m["energy_j"] > 0
+    rnd = evaluate_task(["uniform"], get_spec("swarmloc/CascadedFaultRandom-v0", duration=30.0),
+                        [1_000_000, 1_000_001]).episodes["uniform"]
+    assert all(e["healthy_rmse"] is not None and e["fault_rmse"] is not None for e in rnd)
+
+
+def _tiny_suite() -> Suite:
+    return Suite("tiny", "0", (("swarmloc/Ideal-v0", 1_000_000), ("swarmloc/Ideal-v0", 1_000_001),
+                               ("swarmloc/GradualFault-v0", 1_000_000)))
+
+
+def test_results_file_round_trip(tmp_path):
+    out = tmp_path / "r.json"
+    results = evaluate("chi2-soft", _tiny_suite(), out, progress=False)
+    loaded = load_results(out)
+    assert loaded == results
+    assert loaded.method.name == "chi2-soft" and loaded.method.track == "A" and not loaded.method.privileged
+    assert loaded.suite.sha256 == _tiny_suite().sha256
+    assert loaded.episode_keys() == list(_tiny_suite().episodes)
+    traces = read_traces(traces_path(out))
+    assert {t.task for t in traces} == {"swarmloc/Ideal-v0", "swarmloc/GradualFault-v0"}
+    ideal = next(t for t in traces if t.task == "swarmloc/Ideal-v0")
+    assert ideal.seed == 1_000_000 and ideal.estimate.shape == (400, 4, 3)
+    # the trace is the episode: its RMSE is the file's
+    assert np.sqrt(np.mean(ideal.errors**2)) == pytest.approx(loaded.episodes[0].metrics.rmse, rel=1e-12)
+
+
+def test_parallel_workers_equal_serial():
+    suite = Suite("tiny2", "0", (("swarmloc/GradualFault-v0", 1_000_000), ("swarmloc/CascadedFault-v0", 1_000_003)))
+    serial = evaluate_methods(["random", "oracle"], suite, workers=1, trace=False, progress=False)
+    parallel = evaluate_methods(["random", "oracle"], suite, workers=2, trace=False, progress=False)
+    for name in ("random", "oracle"):
+        assert serial[name].episodes == parallel[name].episodes
+
+
+class _BadShape(DeadReckoning):
+    def step(self, meas: Measurements) -> EstimatorOutput:
+        return EstimatorOutput(positions=np.zeros((1, 2, 3)))
+
+
+class _NonFinite(DeadReckoning):
+    def step(self, meas: Measurements) -> EstimatorOutput:
+        out = super().step(meas)
+        out.positions[0, 0, 0] = np.nan
+        return out
+
+
+def _as_loaded(method, track="B") -> LoadedMethod:
+    return LoadedMethod(type(method).__name__, "test", track, False, True, method)
+
+
+def test_bad_estimator_output_rejected():
+    spec = get_spec("swarmloc/Ideal-v0", duration=0.5)
+    with pytest.raises(ValueError, match=r"positions of shape \(1, 2, 3\); expected \(B, N, 3\) = \(2, 4, 3\)"):
+        rollout(_as_loaded(_BadShape()), spec, [1, 2])
+    with pytest.raises(ValueError, match="non-finite position"):
+        rollout(_as_loaded(_NonFinite()), spec, [1, 2])
+
+
+class _WrongTrust:
+    privileged = False
+    flops_per_channel = 0.0
+
+    def reset(self, batch_size, layout, keys):
+        pass
+
+    def act(self, inp):
+        return np.ones(inp.valid.shape[:-1])
+
+
+def test_bad_policy_output_rejected():
+    spec = get_spec("swarmloc/Ideal-v0", duration=0.5)
+    with pytest.raises(ValueError, match=r"trust must have shape \(B, N, L\)"):
+        rollout(_as_loaded(_WrongTrust(), "A"), spec, [1])
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="workers must be in"):
+        evaluate_methods(["uniform"], _tiny_suite(), workers=0)
+    with pytest.raises(KeyError, match="unknown method"):
+        evaluate_methods(["nope"], _tiny_suite())
+    with pytest.raises(ValueError, match="seeds must be >= 0"):
+        rollout(load_method("uniform"), get_spec("swarmloc/Ideal-v0", duration=0.5), [-1])
