@@ -163,8 +163,9 @@ class LinkTrustCore:
 
     def _world_state(self) -> list[np.ndarray]:
         """The world's ``(B, ...)`` arrays that one ``sense`` changes (restored for episodes not advanced)."""
-        w, buf = self.world, self.world.buffers
-        arrays = [w.steps, buf.pos, buf.vel, buf.imu, buf.label, buf.valid, buf.injected, buf.z]
+        w = self.world
+        # every step buffer the world fills (optional ones such as VO velocity are None when absent)
+        arrays = [w.steps] + [a for a in vars(w.buffers).values() if isinstance(a, np.ndarray)]
         return arrays + [getattr(w, name) for name in _WORLD_PRIVATE_STATE if hasattr(w, name)]
 
     def check_trust(self, trust: np.ndarray) -> np.ndarray:

@@ -61,10 +61,12 @@ class RecordedWorld:
         flight = spec.trajectory
         if not isinstance(flight, RecordedFlight):
             raise ValueError(f"RecordedWorld needs a spec with a recorded trajectory, got {flight.kind!r}")
-        if spec.n_uav != 1 or spec.landmarks or spec.sensors.gps_sigma or spec.n_peer_channels:
+        if (spec.n_uav != 1 or spec.landmarks or spec.sensors.gps_sigma or spec.n_peer_channels
+                or spec.sensors.velocity_sigma is not None):
             raise ValueError(f"{spec.task_id}: a recorded flight has one UAV with anchor channels only; got "
                              f"n_uav={spec.n_uav}, {len(spec.landmarks)} landmarks, "
-                             f"{len(spec.sensors.gps_sigma)} GPS, {spec.n_peer_channels} peer channels")
+                             f"{len(spec.sensors.gps_sigma)} GPS, {spec.n_peer_channels} peer channels, "
+                             f"VO velocity σ {spec.sensors.velocity_sigma}")
         folder = find_util_data(data_dir)
         self.recording: Recording = load_recording(folder, flight.log, float(flight.start), spec.n_steps,
                                                    float(spec.dt), flight.calibration)
