@@ -20,6 +20,11 @@ e = ‖p̂ − p‖ [m] of every scored UAV at every filter update k = 1 … T (
 | ``team_return`` | Σ over all steps of the team standard reward (mean over all UAVs) |
 | ``normalized_score`` | (RMSE_uniform − RMSE) / (RMSE_uniform − RMSE_oracle) on the same episode; null when the gap is below 1 mm (e.g. no fault labels: oracle = uniform) |
 
+On a task with ``scoring.align_first_seconds > 0`` (anchor-free: absolute translation and
+yaw are unobservable), e is measured after the yaw + translation that aligns the first
+seconds of the scored interval with the truth (``swarmloc.bench.alignment``), applied to
+the whole episode.
+
 Trust metrics need the trust the method applied; for a Track B estimator that reports no
 ``weights`` they are null. ``delay_ms``/``energy_j`` are null for an estimator that
 reports no FLOPs.

@@ -42,6 +42,7 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench import metrics as M
+from swarmloc.bench.alignment import align_estimates
 from swarmloc.bench.results import MethodInfo, Results, SuiteInfo, make_results, write_results
 from swarmloc.bench.suites import Suite, require_data
 from swarmloc.envs.core import LinkTrustCore
@@ -176,6 +177,10 @@ class _Recorder:
         self.nodes = np.zeros(n, dtype=bool)
         self.nodes[list(spec.scored_nodes)] = True
         self.errors = np.zeros((n_t, n_b, n))
+        # anchor-free tasks are scored after a yaw + translation alignment (bench/alignment.py),
+        # which needs the whole episode: keep the positions and align once at the end
+        self.align = spec.scoring.align_first_seconds > 0
+        self._positions = (np.zeros((n_t, n_b, n, 3)), np.zeros((n_t, n_b, n, 3))) if self.align else None
         self.team = np.zeros((n_t, n_b))
         self.delay_ms = np.zeros(n_b)
         self.energy_j = np.zeros(n_b)
@@ -194,6 +199,8 @@ class _Recorder:
         """Record update k (0-based) of every episode (``(B, N, ...)`` arrays)."""
         s = self.spec
         self.errors[k] = M.position_errors(estimate, truth)
+        if self._positions is not None:
+            self._positions[0][k], self._positions[1][k] = estimate, truth
         self.label_steps[k] = label[:, self.nodes].any(axis=(1, 2))
         # the reward counts every valid channel as used when the method exposes no trust
         a = applied if applied is not None else np.ones(valid.shape)
@@ -232,8 +239,16 @@ class _Recorder:
             return healthy, M.window_steps(self.times, (float(span[0]), float(span[1]))) & steps_ok
         return None
 
+    def _apply_alignment(self) -> None:
+        """Replace the errors by those after the task's scoring alignment (once, at the end)."""
+        if self._positions is not None:
+            estimate, truth = self._positions
+            self.errors = M.position_errors(align_estimates(self.spec, self.times, estimate, truth), truth)
+            self._positions = None
+
     def episode_metrics(self, b: int) -> dict[str, float | None]:
         """Every metric of episode b except ``normalized_score`` (None here)."""
+        self._apply_alignment()
         s = self.spec
         steps = self.scored_steps
         e = self.errors[steps][:, b][:, self.nodes]
@@ -344,7 +359,8 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
     previous: np.ndarray | None = None
     for k in range(spec.n_steps):
         buf = world.sense()
-        meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1)
+        meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1,
+                                    getattr(buf, "velocity", None))
         if loaded.privileged:
             est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy())))
         out = _check_output(est.step(meas), loaded.name, shape)

@@ -210,11 +210,14 @@ def _node_faulty(b, j, t, imu_time, imu_nodes) -> bool:
     return False
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _velocity_kernel(steps, seeds, sigma, vel, bias, out):
-    """Visual odometry: v_vo = v + b + σ n, n ~ N(0, 1) keyed by (seed, step, VELOCITY, uav·3 + axis)."""
+    """Visual odometry: v_vo = v + b + σ n, n ~ N(0, 1) keyed by (seed, step, VELOCITY, uav·3 + axis).
+
+    Serial: 3·N draws per episode cost less than waking a thread pool.
+    """
     n_b, n = vel.shape[0], vel.shape[1]
-    for b in prange(n_b):
+    for b in range(n_b):
         for i in range(n):
             for d in range(3):
                 out[b, i, d] = vel[b, i, d] + bias[b, i, d] + sigma * normal(seeds[b], steps[b], Stream.VELOCITY,

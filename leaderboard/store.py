@@ -62,7 +62,9 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 _SHIPPED_TRACK_A: tuple[str, ...] = (
     "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "random", "oracle",
 )
-_SHIPPED_TRACK_B: tuple[str, ...] = ("dead-reckoning",)
+_SHIPPED_TRACK_B: tuple[str, ...] = (
+    "dead-reckoning", "imm-kf", "imm-ekf", "imm-arkf", "federated", "federated-fdi", "ci-ekf", "ci-ekf-no-aa",
+)
 
 SHIPPED_REFERENCE_METHODS: frozenset[str] = frozenset(
     (*_SHIPPED_TRACK_A, *_SHIPPED_TRACK_B, *(f"{name}+smooth" for name in _SHIPPED_TRACK_A))
