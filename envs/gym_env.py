@@ -68,7 +68,6 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_space = spaces.Box(0.0, 1.0, (n, n_l, N_FEATURES), np.float32)
         self.action_space = spaces.Box(0.0, 1.0, (n, n_l), np.float32)
         self._check = ActionChecker((n, n_l), "(N, L)")
-        self._trust = np.empty((1, n, n_l))
         self._started = False
         self._renderer = None
 
@@ -120,15 +119,14 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        self._trust[0] = self._check(action)
-        o, terms = self._batch.step(self._trust)
+        o, terms = self._batch.step(self._check(action)[None])
         truncated = bool(o.done[0])
         if truncated:
             self._started = False
         info = {key: value[0] for key, value in self._batch.info_arrays(terms).items()}
         if self.render_mode == "human":
             self.render()
-        return self._batch.observation()[0], float(terms.reward[0].mean()), False, truncated, info
+        return self._batch.observation()[0], float(self._batch.team_reward(terms)[0]), False, truncated, info
 
     def render(self) -> np.ndarray | None:
         """``rgb_array``: the top-down frame ``(480, 480, 3)`` uint8; ``human``: draw it in a window."""

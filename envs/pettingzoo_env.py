@@ -123,6 +123,11 @@ class SwarmLocParallelEnv(ParallelEnv):
             if arr.shape != (n_l,):
                 raise ValueError(f"action of {agent} must have shape (L,) = ({n_l},), got {arr.shape}")
             self._trust[0, self._index[agent]] = arr
+        bad = ~np.isfinite(self._trust[0])
+        if bad.any():
+            i, l = np.argwhere(bad)[0]
+            raise ValueError(f"action of {self.possible_agents[i]} must be finite trust values in [0, 1]; "
+                             f"got {self._trust[0, i, l]} at channel {l}")
         o, terms = self._batch.step(self._check(self._trust))
         truncated = bool(o.done[0]) or int(o.steps[0]) >= self.max_cycles
         self._obs = obs = self._batch.observation()

@@ -269,7 +269,8 @@ class TrustEnvBatch:
     def position_error(self) -> np.ndarray:
         """``(B, N)`` ‖p̂ − p‖ of the last update [m] (the prior mean after reset)."""
         o = self.core._out
-        return np.sqrt(np.sum((o.estimate - o.truth) ** 2, axis=-1))
+        d = o.estimate - o.truth
+        return np.sqrt((d * d).sum(axis=-1))
 
     def state(self, obs: np.ndarray) -> np.ndarray:
         """Global state ``(B, S)`` float32 for centralized critics.
@@ -288,6 +289,10 @@ class TrustEnvBatch:
         out[:, n_obs + 3 * n:n_obs + 6 * n] = x[:, :, 3:].reshape(n_b, 3 * n)
         out[:, n_obs + 6 * n:] = np.sqrt(P[:, :, 0, 0] + P[:, :, 1, 1] + P[:, :, 2, 2])
         return out
+
+    def team_reward(self, terms: RewardTerms) -> np.ndarray:
+        """``(B,)`` team reward: the mean over UAVs of the standard reward."""
+        return terms.reward.sum(axis=1) / self.n_uav
 
     def info_arrays(self, terms: RewardTerms) -> dict[str, np.ndarray]:
         """Per-UAV info ``(B, N)`` arrays (new arrays): ``INFO_KEYS``."""

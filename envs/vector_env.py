@@ -133,7 +133,7 @@ class SwarmLocVectorEnv(VectorEnv):
             infos: dict[str, Any] = {}
         else:
             o, terms = self._batch.step(trust)
-            rewards = terms.reward.mean(axis=1)
+            rewards = self._batch.team_reward(terms)
             infos = self._batch.info_arrays(terms)
             has = ~resetting
             if resetting.any():

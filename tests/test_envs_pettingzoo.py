@@ -104,7 +104,7 @@ def test_spaces_are_cached_and_bad_actions_named():
         env.step({a: v for a, v in act.items() if a != "uav_3"})
     with pytest.raises(ValueError, match=r"uav_0 must have shape \(L,\) = \(11,\)"):
         env.step({**act, "uav_0": np.ones(10)})
-    with pytest.raises(ValueError, match="finite"):
+    with pytest.raises(ValueError, match="uav_2 must be finite"):
         env.step({**act, "uav_2": np.full(11, np.nan)})
     with pytest.warns(RuntimeWarning, match="clipped"):
         env.step({**act, "uav_2": np.full(11, 3.0)})

@@ -119,3 +119,19 @@ def test_vector_bad_actions():
     bad[1, 0, 0] = -np.inf
     with pytest.raises(ValueError, match="finite"):
         vec.step(bad)
+
+
+def test_batched_vector_env_equals_gymnasium_sync_vector_env():
+    """Gymnasium's own SyncVectorEnv (next-step autoreset) over the single envs is the reference."""
+    sync = gym.make_vec("swarmloc/HybridNoise10-v0", num_envs=3, vectorization_mode="sync", duration=1.0)
+    batched = gym.make_vec("swarmloc/HybridNoise10-v0", num_envs=3, duration=1.0)
+    assert sync.metadata["autoreset_mode"] is batched.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    actions = np.random.default_rng(2).uniform(0, 1, (25, 3, 9, 9)).astype(np.float32)
+    np.testing.assert_array_equal(sync.reset(seed=4)[0], batched.reset(seed=4)[0])
+    for action in actions:
+        r1, r2 = sync.step(action), batched.step(action)
+        for k in range(4):
+            np.testing.assert_array_equal(r1[k], r2[k])
+        for key in ("accuracy", "position_error", "_accuracy"):
+            if key in r1[4] or key in r2[4]:
+                np.testing.assert_array_equal(r1[4][key], r2[4][key])
