@@ -25,6 +25,8 @@ from swarmloc.bench.cli import COMMANDS, register_command
 
 #: group → subcommand name → (config type, handler)
 GROUPS: dict[str, dict[str, tuple[type, Callable[[Any], int | None]]]] = {}
+#: group → subcommand name → its one line of help
+_MEMBER_HELP: dict[str, dict[str, str]] = {}
 _GROUP_HELP = {"train": "Train a method (training seeds only).",
                "reproduce": "Reproduce a paper's tables with our implementations.",
                "data": "Import external data sets (e.g. the UTIL flight logs)."}
@@ -43,7 +45,8 @@ def register_subcommand(group: str, name: str, config: type, handler: Callable[[
     """
     members = GROUPS.setdefault(group, {})
     members[name] = (config, handler)
-    options = tuple(Annotated[cls, tyro.conf.subcommand(n, description=help or None)]
+    _MEMBER_HELP.setdefault(group, {})[name] = help
+    options = tuple(Annotated[cls, tyro.conf.subcommand(n, description=_MEMBER_HELP[group][n] or None)]
                     for n, (cls, _) in members.items())
     # a suppressed None keeps a one-member union a union (a subcommand level, not flattened)
     nested = Annotated[Union[options + (Annotated[None, tyro.conf.Suppress],)],  # type: ignore[valid-type]
@@ -116,3 +119,5 @@ register_subcommand("reproduce", "pfnn", ReproducePfnnArgs, run_reproduce_pfnn,
 
 # ``swarmloc data import-util`` (bench/data_cli.py) registers itself into the ``data`` group
 from swarmloc.bench import data_cli  # noqa: E402,F401
+# ``swarmloc reproduce immarkf | federated | dtvirm`` (bench/papers_cli.py)
+from swarmloc.bench import papers_cli  # noqa: E402,F401
