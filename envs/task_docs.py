@@ -75,6 +75,9 @@ def _faults(spec: TaskSpec) -> list[str]:
         lines.append(f"Camera outages {list(v.windows)} s: no landmark channel is valid.")
     if f.packet_loss:
         lines.append(f"UWB packet loss {f.packet_loss:.0%}.")
+    if (o := f.uwb_outage) is not None:
+        nodes = f"UAVs {list(o.nodes)}" if o.nodes else "every UAV"
+        lines.append(f"UWB loss {list(o.windows)} s: {'/'.join(o.targets)} ranges lost on {nodes}.")
     for d in f.gps_drifts:
         lines.append(f"GPS drift {d.rate:g} m/s along {list(d.direction)} on UAVs {list(d.nodes)}, "
                      f"{d.start:g}–{d.end:g} s.")
@@ -86,9 +89,9 @@ def _faults(spec: TaskSpec) -> list[str]:
 
 
 _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cascades", "imu_cascade_random",
-                     "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise"}
+                     "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage"}
 _DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "peers", "camera_sigma", "camera_max_range",
-                      "gps_sigma"}
+                      "gps_sigma", "velocity_sigma", "velocity_bias_sigma"}
 
 
 def _other_fields(model, described: set[str]) -> list[tuple[str, object]]:
@@ -122,6 +125,15 @@ def _measurement_model(spec: TaskSpec) -> str:
                      f"axis, visible within {s.camera_max_range:g} m.")
     if s.gps_sigma:
         lines.append(f"- GPS: position fix per UAV, σ = {list(s.gps_sigma)} m.")
+    if s.velocity_sigma is not None:
+        lines.append(f"- Visual odometry: world-frame velocity per UAV, σ {s.velocity_sigma:g} m/s per axis"
+                     + (f", constant per-episode bias σ {s.velocity_bias_sigma:g} m/s" if s.velocity_bias_sigma
+                        else "") + "; Track B estimators receive it as `Measurements.velocity` (the link-trust "
+                     "CEKF does not use it).")
+    if spec.scoring.align_first_seconds > 0:
+        lines.append(f"- Scoring: errors after the yaw + 3-D translation that aligns the estimates of "
+                     f"{spec.scoring.start:g}–{spec.scoring.start + spec.scoring.align_first_seconds:g} s with the "
+                     "truth (absolute translation and yaw are unobservable; `swarmloc.bench.alignment`).")
     lines += [f"- Sensors, `{name}`: {value}." for name, value in _other_fields(s, _DESCRIBED_SENSORS)]
     fl = spec.filter
     lines.append(f"- Filter: one 6-state CEKF per UAV; a channel joins the joint update when α > α_th = "
