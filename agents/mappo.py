@@ -31,15 +31,7 @@ from typing import Callable
 
 import numpy as np
 import torch
-from tensordict import TensorDictBase
-from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
-from torchrl.collectors import Collector
-from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
-from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.modules import ProbabilisticActor
-from torchrl.objectives import ClipPPOLoss
-from torchrl.objectives.value import GAE
 
 from swarmloc.envs import torchrl_env
 from swarmloc.envs.observation import N_FEATURES, VALID, squash
@@ -102,10 +94,14 @@ class MappoConfig:
     """actor hidden widths (madrl §2.2.2: 128, 64)"""
     critic_hidden: int = 64
     """critic embedding width"""
+    privileged_critic: bool = True
+    """the critic also sees each UAV's true position error (training only; the actor never does)"""
     init_trust: float = 0.8
     """trust the untrained actor outputs"""
     init_log_std: float = -0.5
     """initial log σ of the Gaussian on the trust logit"""
+    noise_hold: int = 10
+    """steps (0.1 s each) an exploration draw is held: long enough to move the filter's error"""
     accuracy_only: bool = False
     """madrl Exp. 7 ablation: λ = 0 for delay, energy and jitter"""
     eval_every: int = 500_000
@@ -129,6 +125,8 @@ class MappoConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
         if not 0 <= self.seed < TRAINING_SEED_LIMIT:
             raise ValueError(f"seed must be a training seed in [0, {TRAINING_SEED_LIMIT}), got {self.seed!r}")
+        if self.noise_hold < 1 or self.rollout_steps % self.noise_hold:
+            raise ValueError(f"noise_hold={self.noise_hold} must be >= 1 and divide rollout_steps={self.rollout_steps}")
         if (self.num_envs * self.rollout_steps) % self.minibatches:
             raise ValueError(f"num_envs·rollout_steps = {self.num_envs * self.rollout_steps} must be divisible by "
                              f"minibatches = {self.minibatches}")
@@ -160,20 +158,30 @@ class SwarmCritic(nn.Module):
     e_i; the swarm context is the mean of e_j over UAVs. V_i = ψ(e_i, mean_j e_j).
     Permuting the UAVs permutes the values and nothing else.
 
+    With ``privileged=True`` each UAV's embedding also gets its true position error of
+    the last update (the env's ``("uav", "info", "position_error")``) — truth the critic
+    may see because it only exists during training (CTDE); the actor never does. The
+    accuracy reward is a function of that error, so the value baseline gets much sharper.
+
     Args:
         n_features: F.
         width: embedding width.
+        privileged: also read the per-UAV position error.
     """
 
-    def __init__(self, n_features: int = N_FEATURES, width: int = 128) -> None:
+    def __init__(self, n_features: int = N_FEATURES, width: int = 128, privileged: bool = True) -> None:
         super().__init__()
         half = width // 2
+        self.privileged = privileged
+        n_uav_features = 4 if privileged else 2
         self.channel = nn.Sequential(nn.Linear(n_features, width), nn.ReLU(), nn.Linear(width, half), nn.ReLU())
-        self.uav = nn.Sequential(nn.Linear(2 * half + 2, width), nn.ReLU(), nn.Linear(width, half), nn.ReLU())
+        self.uav = nn.Sequential(nn.Linear(2 * half + n_uav_features, width), nn.ReLU(), nn.Linear(width, half),
+                                 nn.ReLU())
         self.head = nn.Sequential(nn.Linear(2 * half, width), nn.ReLU(), nn.Linear(width, 1))
 
-    def forward(self, obs: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
-        """Values ``(..., N, 1)`` from observations ``(..., N, L, F)`` and state ``(..., S)``."""
+    def forward(self, obs: torch.Tensor, state: torch.Tensor, error: torch.Tensor | None = None) -> torch.Tensor:
+        """Values ``(..., N, 1)`` from observations ``(..., N, L, F)``, state ``(..., S)`` and,
+        when privileged, the position errors ``(..., N, 1)`` [m]."""
         n, n_l, n_f = obs.shape[-3:]
         lead = obs.shape[:-3]
         # state = [obs (N·L·F), prior position (3N), velocity (3N), position std (N)]
@@ -182,7 +190,13 @@ class SwarmCritic(nn.Module):
             raise ValueError(f"state has {state.shape[-1]} entries; expected N·L·F + 7N = {n * n_l * n_f + 7 * n}")
         speed = tail[..., 3 * n:6 * n].reshape(*lead, n, 3).norm(dim=-1)
         pos_std = tail[..., 6 * n:7 * n]
-        uav_state = torch.stack([squash(speed, 1.0), squash(pos_std, 1.0)], dim=-1)  # (..., N, 2)
+        features = [squash(speed, 1.0), squash(pos_std, 1.0)]
+        if self.privileged:
+            if error is None:
+                raise ValueError("a privileged SwarmCritic needs the per-UAV position error")
+            err = error[..., 0]
+            features += [squash(err, 1.0), torch.exp(-0.5 * err**2)]  # the latter: last step's accuracy reward
+        uav_state = torch.stack(features, dim=-1)  # (..., N, 2 or 4)
         valid = obs[..., VALID:VALID + 1]  # (..., N, L, 1)
         h = self.channel(obs)
         h_mean = (h * valid).sum(-2) / valid.sum(-2).clamp(min=1.0)
@@ -215,6 +229,57 @@ class MaskedNormal(torch.distributions.Normal):
         return self.loc
 
 
+class HeldNoiseNormal(MaskedNormal):
+    """``MaskedNormal`` that samples u = μ + σ ε with a given standard-normal ε (held over steps).
+
+    The log-probability is the per-step Gaussian's, as for ``MaskedNormal``; only where the
+    noise comes from differs (see ``HeldNoise``).
+    """
+
+    def __init__(self, loc: torch.Tensor, scale: torch.Tensor, valid: torch.Tensor, noise: torch.Tensor) -> None:
+        super().__init__(loc, scale, valid)
+        self.noise = noise
+
+    def rsample(self, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
+        if len(sample_shape):
+            raise ValueError("HeldNoiseNormal draws one sample per step (its noise is given)")
+        return self.loc + self.scale * self.noise
+
+    def sample(self, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
+        with torch.no_grad():
+            return self.rsample(sample_shape)
+
+
+class HeldNoise(nn.Module):
+    """Exploration noise ε ~ N(0, 1) per channel, redrawn every ``hold`` policy calls.
+
+    Trust acts on the filter through its error, which builds up over many steps: a
+    perturbation held for ``hold`` steps changes the error (and the reward) clearly,
+    while per-step noise mostly adds jitter. ``start_batch()`` is called before every
+    collector batch, so blocks align with batches (and, as ``hold`` divides the
+    rollout length and the rollout length divides the episode length, with episodes).
+    Draws come from torch's global generator (deterministic under ``torch.manual_seed``).
+
+    Args:
+        hold: steps a draw is kept (1 = independent noise every step).
+    """
+
+    def __init__(self, hold: int) -> None:
+        super().__init__()
+        self.hold = hold
+        self._eps: torch.Tensor | None = None
+        self._calls = 0
+
+    def start_batch(self) -> None:
+        self._eps, self._calls = None, 0
+
+    def forward(self, loc: torch.Tensor) -> torch.Tensor:
+        if self._eps is None or self._eps.shape != loc.shape or self._calls % self.hold == 0:
+            self._eps = torch.randn(loc.shape)
+        self._calls += 1
+        return self._eps
+
+
 class _ActorParams(nn.Module):
     """``ChannelActor`` → (μ, σ, valid) per channel, the inputs of ``MaskedNormal``."""
 
@@ -232,8 +297,18 @@ def _logit_to_trust(logit: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return torch.where(valid, torch.sigmoid(logit), torch.ones_like(logit))
 
 
-def build_modules(cfg: MappoConfig) -> tuple[ChannelActor, ProbabilisticActor, TensorDictSequential, TensorDictModule]:
-    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module."""
+def build_modules(cfg: MappoConfig) -> tuple:
+    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module.
+
+    Returns:
+        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise),
+        critic TensorDictModule, the HeldNoise module)``.
+    """
+    # torchrl is imported here, not at the top, so that the CLI can read MappoConfig quickly
+    from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
+    from torchrl.envs.utils import ExplorationType
+    from torchrl.modules import ProbabilisticActor
+
     actor_net = ChannelActor(N_FEATURES, cfg.hidden, cfg.init_trust, cfg.init_log_std)
     params = TensorDictModule(_ActorParams(actor_net), in_keys=[(G, "observation")],
                               out_keys=[(G, "loc"), (G, "scale"), (G, "valid")])
@@ -242,10 +317,18 @@ def build_modules(cfg: MappoConfig) -> tuple[ChannelActor, ProbabilisticActor, T
         out_keys=[(G, "trust_logit")], distribution_class=MaskedNormal, return_log_prob=True,
         log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
     to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[(G, "action")])
-    policy = TensorDictSequential(prob_actor, to_trust)
-    critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden), in_keys=[(G, "observation"), "state"],
+    # acting: the same parameters, with exploration noise held over cfg.noise_hold steps
+    noise = HeldNoise(cfg.noise_hold)
+    sample = ProbabilisticTensorDictModule(
+        in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
+        out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
+        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
+    policy = TensorDictSequential(params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]),
+                                  sample, to_trust)
+    critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
+    critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,
                               out_keys=[(G, "state_value")])
-    return actor_net, prob_actor, policy, critic
+    return actor_net, prob_actor, policy, critic, noise
 
 
 # --------------------------------------------------------------------------- boilerplate
@@ -282,6 +365,23 @@ class TrainResult:
     last_eval: dict[str, float]
 
 
+def probe_features() -> dict[str, torch.Tensor]:
+    """Fixed per-channel inputs whose trust is logged while training (is isolation being learned?).
+
+    A clean and a faulty anchor and peer link (faulty: ≈3 m innovation, NIS ≈ 45), the
+    previous trust 0.8, features as ``build_observation`` scales them.
+    """
+    out = {}
+    for kind, column in (("anchor", 0), ("peer", 1)):
+        for name, innovation, nis in (("clean", 0.1, 0.1), ("faulty", 0.75, 0.9)):
+            x = torch.zeros(N_FEATURES)
+            x[:5] = torch.tensor([innovation, 0.6, 0.8, 0.1, nis])
+            x[5 + column] = 1.0
+            x[VALID] = 1.0
+            out[f"{kind}_{name}"] = x
+    return out
+
+
 def _team_returns(reward: torch.Tensor, done: torch.Tensor, running: np.ndarray) -> list[float]:
     """Finished episodes' team returns from a ``(B, T)`` batch (``running`` carries partial sums)."""
     team = reward.mean(dim=(-2, -1)).numpy()  # (B, T): mean over UAVs
@@ -313,6 +413,11 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     """
     import numba
     from torch.utils.tensorboard import SummaryWriter
+    from torchrl.collectors import Collector
+    from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
+    from torchrl.envs.utils import ExplorationType
+    from torchrl.objectives import ClipPPOLoss
+    from torchrl.objectives.value import GAE
     from tqdm import tqdm
 
     # ---- determinism and threads
@@ -324,7 +429,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     writer = writer or SummaryWriter(str(run_dir))
     writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
-    actor_net, prob_actor, policy, critic = build_modules(cfg)
+    actor_net, prob_actor, policy, critic, noise = build_modules(cfg)
     flops_per_channel = count_flops_per_channel(actor_net) + SMOOTHING_FLOPS_PER_CHANNEL
 
     # ---- one batched env + collector per task; training seeds only
@@ -348,6 +453,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                                     trust_policy=True, exploration_type=ExplorationType.RANDOM,
                                     auto_register_policy_transforms=False))
     iterators = [iter(c) for c in collectors]
+    probes = probe_features()
     steps_done = [0] * len(cfg.tasks)
     running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
@@ -380,7 +486,10 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
             if check_seeds is not None:
                 check_seeds(list(range(base, base + cfg.num_envs)))
             envs[t].set_seed(base)
+        tic = time.perf_counter()
+        noise.start_batch()
         batch = next(iterators[t])  # (B, T)
+        t_collect = time.perf_counter() - tic
         steps_done[t] += cfg.rollout_steps
         frames += batch.numel()
         if cfg.anneal_lr:
@@ -403,12 +512,15 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
         for flag in ("done", "terminated"):
             nxt.set((G, flag), nxt[flag].unsqueeze(-1).expand(reward_shape))
         nxt.set((G, "reward"), nxt[G, "reward"] * cfg.reward_scale)
+        tic = time.perf_counter()
         with torch.no_grad():
             gae(batch)
+        t_gae = time.perf_counter() - tic
         adv = batch[G, "advantage"]
         batch.set((G, "advantage"), (adv - adv.mean()) / adv.std().clamp(min=1e-6))
 
         # ---- PPO epochs over minibatches
+        tic = time.perf_counter()
         replay = replays[t]
         replay.extend(batch.reshape(-1))
         stats: dict[str, list[float]] = {}
@@ -428,9 +540,14 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
         for key, vals in stats.items():
             writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
         writer.add_scalar("charts/log_std", actor_net.log_std.item(), frames)
+        with torch.no_grad():
+            for name, x in probes.items():
+                writer.add_scalar(f"probe/trust_{name}", actor_net.trust(x).item(), frames)
         writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
         sps = frames / max(time.time() - start, 1e-9)
         writer.add_scalar("charts/SPS", sps, frames)
+        for name, seconds in (("collect", t_collect), ("gae", t_gae), ("update", time.perf_counter() - tic)):
+            writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
         bar.update(batch.numel())
         bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
                         sps=f"{sps:.0f}")

@@ -58,6 +58,7 @@ class MethodEntry:
 
 
 _A = "swarmloc.agents.classical"
+_M = "swarmloc.agents.mappo_policy"
 #: every shipped method, in display order
 REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("uniform", f"{_A}:uniform_policy", "A", False, True, "standard CEKF, α = 1 (score 0)"),
@@ -84,6 +85,11 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "anchor-free CI-EKF + χ² UWB adaptive adjustment, MDS-MAP init (dtvirm)"),
     MethodEntry("ci-ekf-no-aa", "swarmloc.agents.ci_ekf:ci_ekf_no_aa", "B", False, True,
                 "CI-EKF without the UWB adaptive adjustment (dtvirm ablation)"),
+    MethodEntry("mappo", f"{_M}:mappo", "A", False, True, "MAPPO link trust (shipped weights) + Markov smoothing"),
+    MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", False, True,
+                "MAPPO, raw α without smoothing (madrl Exp. 6)"),
+    MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A", False, True,
+                "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True, "privileged: α_min on labelled faults (score 1)"),
 )}
 

@@ -119,5 +119,7 @@ register_subcommand("reproduce", "pfnn", ReproducePfnnArgs, run_reproduce_pfnn,
 
 # ``swarmloc data import-util`` (bench/data_cli.py) registers itself into the ``data`` group
 from swarmloc.bench import data_cli  # noqa: E402,F401
+# ``swarmloc train mappo`` and ``swarmloc reproduce madrl`` (bench/mappo_cli.py)
+from swarmloc.bench import mappo_cli  # noqa: E402,F401
 # ``swarmloc reproduce immarkf | federated | dtvirm`` (bench/papers_cli.py)
 from swarmloc.bench import papers_cli  # noqa: E402,F401

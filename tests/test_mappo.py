@@ -1,0 +1,211 @@
+"""MAPPO link trust (issue 5): training smoke test, shapes, invariances, shipped weights, seeds, determinism."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from swarmloc.agents.mappo_policy import (
+    WEIGHTS_DIR,
+    ChannelActor,
+    MappoPolicy,
+    count_flops_per_channel,
+    load_actor,
+)
+from swarmloc.agents.registry import load_method
+from swarmloc.agents.smoothing import MarkovSmoothing
+from swarmloc.envs.observation import N_FEATURES, VALID
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = WEIGHTS_DIR / "mappo.pt"
+
+
+def _random_obs(rng: np.random.Generator, b: int, n: int, n_l: int) -> np.ndarray:
+    obs = rng.uniform(0.0, 1.0, (b, n, n_l, N_FEATURES)).astype(np.float32)
+    obs[..., VALID] = 1.0
+    return obs
+
+
+def _trust_input(obs: np.ndarray):
+    from swarmloc.agents.protocols import TrustInput
+
+    b, n, n_l, _ = obs.shape
+    z = np.zeros((b, n, n_l))
+    return TrustInput.view(obs, z, z, z, np.ones((b, n, n_l)), np.zeros((b, n)), obs[..., VALID] > 0.5, 0.1, 1)
+
+
+def _tiny_config(tmp_path: Path, **kw):
+    from swarmloc.agents.mappo import MappoConfig
+
+    base = dict(tasks=("CascadedFault-v0",), frames=400, num_envs=4, rollout_steps=100, epochs=1, minibatches=2,
+                run_dir=str(tmp_path), progress=False, eval_every=0, checkpoint_every=0)
+    base.update(kw)
+    return MappoConfig(**base)
+
+
+def test_train_cli_smoke(tmp_path):
+    """``python -m swarmloc.bench.train_cli`` trains a few hundred frames and writes weights, provenance and logs."""
+    out = tmp_path / "w" / "mappo.pt"
+    cmd = [sys.executable, "-m", "swarmloc.bench.train_cli", "--frames", "400", "--tasks", "CascadedFault-v0",
+           "Scale2-v0", "--num-envs", "2", "--rollout-steps", "100", "--epochs", "1", "--minibatches", "2",
+           "--eval-seeds", "1", "--run-dir", str(tmp_path / "run"), "--weights-out", str(out), "--no-progress"]
+    proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    actor = load_actor(out)
+    assert isinstance(actor, ChannelActor)
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["frames"] == 400 and meta["command"].endswith(f"--weights-out {out} --no-progress")
+    assert {"wall_time_s", "git_commit", "config", "dev_eval"} <= set(meta)
+    assert meta["episode_seeds"]["max"] < 1_000_000
+    assert any(k.endswith("/healthy_rmse") for k in meta["dev_eval"])
+    assert list((tmp_path / "run").glob("events.out.tfevents.*")), "no TensorBoard log"
+    assert (tmp_path / "run" / "checkpoint.pt").is_file()
+
+
+@pytest.mark.parametrize("n,n_l", [(2, 9), (4, 6), (8, 15), (32, 39)])
+def test_policy_any_swarm_size_and_channel_count(n, n_l):
+    """One shared per-channel actor serves any N and L; α ∈ (0, 1]; a channel's α depends on its features only."""
+    torch.manual_seed(0)
+    policy = MappoPolicy(ChannelActor())
+    rng = np.random.default_rng(n)
+    obs = _random_obs(rng, 3, n, n_l)
+    alpha = policy.act(_trust_input(obs))
+    assert alpha.shape == (3, n, n_l) and alpha.dtype == np.float64
+    assert np.all(alpha > 0.0) and np.all(alpha <= 1.0)
+    moved = obs.copy()
+    moved[0, 0, 0, :5] = 1.0 - moved[0, 0, 0, :5]  # change one channel's features
+    again = policy.act(_trust_input(moved))
+    assert np.array_equal(np.delete(again.ravel(), 0), np.delete(alpha.ravel(), 0))
+    absent = obs.copy()
+    absent[..., 0, VALID] = 0.0
+    assert np.all(policy.act(_trust_input(absent))[..., 0] == 1.0)
+
+
+def test_policy_runs_on_tasks_of_different_shapes():
+    """The same weights run through the runner on Scale2 and Scale8 (short episodes)."""
+    from swarmloc.agents.registry import LoadedMethod
+    from swarmloc.bench.runner import rollout
+    from swarmloc.envs.tasks import get_spec
+
+    torch.manual_seed(0)
+    for task in ("Scale2-v0", "Scale8-v0"):
+        method = MarkovSmoothing(MappoPolicy(ChannelActor()))
+        loaded = LoadedMethod("mappo", "test", "A", False, True, method)
+        metrics, _ = rollout(loaded, get_spec(task, duration=1.0), [7, 8])
+        assert len(metrics) == 2 and all(np.isfinite(m["rmse"]) for m in metrics)
+
+
+def test_critic_permutation_invariant_over_uavs():
+    """Permuting the UAVs (and every UAV's peer channels) permutes the per-UAV values; the swarm mean is unchanged."""
+    from swarmloc.agents.mappo import SwarmCritic
+
+    torch.manual_seed(0)
+    n, n_anchor = 5, 3
+    n_l = n_anchor + n - 1
+    critic = SwarmCritic(N_FEATURES, 32, privileged=True)
+    rng = np.random.default_rng(1)
+    obs = torch.from_numpy(_random_obs(rng, 2, n, n_l))
+    filt = torch.from_numpy(rng.normal(size=(2, n, 7)).astype(np.float32)).abs()
+    err = torch.from_numpy(rng.uniform(0, 3, (2, n, 1)).astype(np.float32))
+
+    def state(o: torch.Tensor, f: torch.Tensor) -> torch.Tensor:
+        # [obs, positions (3N), velocities (3N), std (N)] as in TrustEnvBatch.state
+        return torch.cat([o.reshape(2, -1), f[..., :3].reshape(2, -1), f[..., 3:6].reshape(2, -1), f[..., 6]], -1)
+
+    values = critic(obs, state(obs, filt), err)
+    perm = [3, 0, 4, 1, 2]
+    # UAV i's peer slot for UAV j (j ≠ i, index order) → the permuted layout's slot
+    p_obs = torch.empty_like(obs)
+    for new_i, old_i in enumerate(perm):
+        peers_old = [j for j in range(n) if j != old_i]
+        peers_new = [perm[j] for j in range(n) if j != new_i]
+        cols = [n_anchor + peers_old.index(j) for j in peers_new]
+        p_obs[:, new_i, :n_anchor] = obs[:, old_i, :n_anchor]
+        p_obs[:, new_i, n_anchor:] = obs[:, old_i, cols]
+    p_values = critic(p_obs, state(p_obs, filt[:, perm]), err[:, perm])
+    torch.testing.assert_close(p_values, values[:, perm], rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(p_values.mean(1), values.mean(1), rtol=1e-5, atol=1e-6)
+    # and it runs on another swarm size with the same weights
+    assert critic(obs[:, :2, :4], state(obs[:, :2, :4], filt[:, :2]), err[:, :2]).shape == (2, 2, 1)
+
+
+def test_flops_counted_once_with_flop_counter():
+    actor = ChannelActor()
+    flops = count_flops_per_channel(actor)
+    matmul = 2 * (N_FEATURES * 128 + 128 * 64 + 64 * 1)
+    assert matmul <= flops < matmul + 1000
+    assert MappoPolicy(actor).flops_per_channel == flops
+    assert MappoPolicy(actor, isolation=False).flops_per_channel == 0.0
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="shipped weights not trained yet")
+def test_shipped_weights_load_and_give_trust_in_unit_interval():
+    """``mappo`` and its ablations load without training and output α in (0, 1] on a real task."""
+    from swarmloc.agents.registry import get_entry
+    from swarmloc.bench.runner import rollout
+    from swarmloc.envs.tasks import get_spec
+
+    meta = json.loads(SHIPPED.with_suffix(".json").read_text())
+    assert {"command", "frames", "wall_time_s", "git_commit"} <= set(meta)
+    state = torch.load(SHIPPED, weights_only=True)
+    assert all(isinstance(v, torch.Tensor) for v in state.values())  # a plain state_dict
+    assert SHIPPED.stat().st_size < 200_000
+    for name in ("mappo", "mappo-no-smoothing", "mappo-no-isolation"):
+        assert get_entry(name).track == "A"
+        loaded = load_method(name)
+        rng = np.random.default_rng(0)
+        obs = _random_obs(rng, 2, 4, 11)
+        loaded.method.reset(2, _layout(4, 11), np.arange(2))
+        alpha = loaded.method.act(_trust_input(obs))
+        assert alpha.shape == (2, 4, 11) and np.all(alpha > 0.0) and np.all(alpha <= 1.0)
+        if name == "mappo-no-isolation":
+            assert np.all(alpha == 1.0)
+    metrics, _ = rollout(load_method("mappo"), get_spec("CascadedFault-v0", duration=2.0), [3])
+    assert np.isfinite(metrics[0]["rmse"]) and metrics[0]["delay_ms"] < 50.0
+
+
+def _layout(n: int, n_l: int):
+    from swarmloc.envs.channels import ChannelLayout
+
+    zeros = np.zeros((n, n_l), dtype=np.int64)
+    return ChannelLayout(kind=zeros, target=zeros, linked=np.ones((n, n_l), bool), sigma=np.ones((n, n_l)))
+
+
+def test_missing_weights_give_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="swarmloc train mappo"):
+        load_method("mappo", weights=tmp_path / "nope.pt")
+
+
+def test_training_refuses_test_and_dev_seeds(tmp_path):
+    from swarmloc.agents.mappo import EpisodeSeeds, train
+    from swarmloc.bench.suites import check_training_seeds
+    from swarmloc.bench.train_cli import TrainMappoArgs, train_mappo
+
+    for seed in (1_000_000, 1_000_031, 2_000_003):
+        with pytest.raises(ValueError, match="training seed"):
+            train_mappo(TrainMappoArgs(seed=seed, frames=400, run_dir=str(tmp_path)))
+    seeder = EpisodeSeeds(3, 0, 16)
+    check_training_seeds([seeder.next_base() + b for _ in range(200) for b in range(16)])
+
+    def refuse(seeds: list[int]) -> None:
+        raise ValueError(f"refused {seeds[:2]}")
+
+    with pytest.raises(ValueError, match="refused"):  # the guard runs before any episode is played
+        train(_tiny_config(tmp_path), check_seeds=refuse)
+
+
+def test_training_is_deterministic_given_a_seed(tmp_path):
+    from swarmloc.agents.mappo import train
+
+    runs = [train(_tiny_config(tmp_path / str(i), seed=seed)) for i, seed in enumerate((5, 5, 6))]
+    a, b, c = (r.actor_state for r in runs)
+    assert a.keys() == b.keys()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert runs[0].episode_seeds == runs[1].episode_seeds
+    assert any(not torch.equal(a[k], c[k]) for k in a)
