@@ -16,10 +16,28 @@ import gymnasium as gym
 from .registration import register_tasks
 
 
+_USAGE = """Every task is registered on `import swarmloc.envs` and served through four APIs:
+
+```python
+import gymnasium as gym
+import swarmloc.envs
+
+env = gym.make("swarmloc/NLOS-v0")                      # Gymnasium: obs (N, L, F), action (N, L), team reward
+vec = gym.make_vec("swarmloc/NLOS-v0", num_envs=1024)   # batched vector env, next-step autoreset
+par = swarmloc.envs.parallel_env("swarmloc/NLOS-v0")    # PettingZoo: agents uav_0..uav_{N-1}; swarmloc.envs.env(...) for AEC
+trl = swarmloc.envs.torchrl_env("swarmloc/NLOS-v0", batch_size=1024)  # torchrl EnvBase, group "uav"
+```
+
+Keyword arguments override task-spec fields (`duration=5.0`, `sensors={"imu_sigma": 0.2}`), the
+reward weights (`reward_weights={...}`), the method's declared `policy_flops` per UAV per step
+(charged in the delay and energy terms) and the `processor` profile. `reset(seed=s)` plays
+episode seed `s`, the same episode the bench suites call seed `s`."""
+
+
 def task_pages() -> dict[str, str]:
     """File name → Markdown text for every registered swarmloc task, plus ``index.md``."""
     register_tasks()
-    pages, index = {}, ["# swarmloc tasks", "", "| Task | Class | Summary |", "|------|-------|---------|"]
+    pages, index = {}, ["# swarmloc tasks", "", _USAGE, "", "| Task | Class | Summary |", "|------|-------|---------|"]
     for task_id in sorted(i for i in gym.registry if i.startswith("swarmloc/")):
         env_spec = gym.spec(task_id)
         module, name = env_spec.entry_point.split(":")

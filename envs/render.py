@@ -97,7 +97,7 @@ class TopDownRenderer:
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title(f"{self.title}  t = {time_s:.1f} s", fontsize=9)
-        ax.legend(loc="upper right", fontsize=7)
+        ax.legend(loc="best", fontsize=7, framealpha=0.6)
         self.fig.tight_layout()
         self.fig.canvas.draw()
         if self._window:
