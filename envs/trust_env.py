@@ -153,8 +153,12 @@ class EpisodeSeeder:
         self._rngs: list[np.random.Generator | None] = [None] * batch_size
         self._pending: list[int | None] = [None] * batch_size
 
-    def seed(self, seeds: int | Sequence[int | None] | None) -> None:
-        """Seed every environment: ``int`` → ``s + b``; a sequence → one per env; ``None`` → keep."""
+    def seed(self, seeds: int | Sequence[int | None] | None, mask: np.ndarray | None = None) -> None:
+        """Seed the environments (those in ``mask`` only, if given).
+
+        ``int`` s → environment b gets ``s + b``; a sequence → one seed (or None) per
+        environment; ``None`` → keep the generators.
+        """
         if seeds is None:
             seeds = [None] * self.batch_size
         elif isinstance(seeds, (int, np.integer)):
@@ -163,7 +167,7 @@ class EpisodeSeeder:
         if len(seeds) != self.batch_size:
             raise ValueError(f"expected {self.batch_size} seeds (one per environment), got {len(seeds)}")
         for b, s in enumerate(seeds):
-            if s is None:
+            if s is None or (mask is not None and not mask[b]):
                 continue
             if not isinstance(s, (int, np.integer)) or not 0 <= int(s) < _SEED_BOUND:
                 raise ValueError(f"seed for environment {b} must be an integer in [0, 2**63 - 1), got {s!r}")
@@ -207,7 +211,6 @@ class TrustEnvBatch:
         self.policy_flops = policy_flops
         self.processor = processor
         self._one_hot = kind_one_hot(self.layout.kind)
-        self._last: CoreStep | None = None
         self._serial = batch_size < SERIAL_BELOW
 
     # ------------------------------------------------------------------ shapes
@@ -237,13 +240,11 @@ class TrustEnvBatch:
         # jerk feature against it: clear it, so an episode depends on its seed only (as in a
         # fresh core, whose buffer starts at zero).
         self.core.world.buffers.imu[slice(None) if mask is None else np.asarray(mask, dtype=bool)] = 0.0
-        self._last = self._serially(self.core.reset, seeds, mask)
-        return self._last
+        return self._serially(self.core.reset, seeds, mask)
 
     def step(self, trust: np.ndarray) -> tuple[CoreStep, RewardTerms]:
         """Apply validated trust ``(B, N, L)`` in [0, 1]; returns the core step and reward terms ``(B, N)``."""
         o = self._serially(self.core.step, trust)
-        self._last = o
         terms = standard_reward(o.estimate, o.truth, o.applied, o.prev_trust, o.valid, self.spec.filter.alpha_th,
                                 o.flops, self.policy_flops, self.reward_weights, self.processor)
         return o, terms

@@ -104,7 +104,7 @@ class SwarmLocVectorEnv(VectorEnv):
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
                 raise ValueError(f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with at "
                                  f"least one True, got dtype {mask.dtype} shape {mask.shape}")
-        self._seeder.seed(seed)
+        self._seeder.seed(seed, mask)
         index = None if mask is None else np.nonzero(mask)[0]
         self._batch.reset(self._seeder.draw(index), mask)
         if mask is None:

@@ -106,6 +106,12 @@ def test_vector_truncates_at_max_episode_steps_and_reset_mask():
     vec.reset(seed=[7, None, None], options={"reset_mask": np.array([True, False, False])})
     assert vec.batch.core.world.seeds[0] == 7
     assert vec.batch.core._out.steps.tolist() == [0, 4, 4]
+    vec.reset(seed=50, options={"reset_mask": np.array([False, True, False])})
+    assert vec.batch.core.world.seeds[1] == 51
+    for _ in range(5):  # env 1 truncates one step after envs 0 and 2; each autoresets
+        vec.step(act)
+    seeds = vec.batch.core.world.seeds
+    assert seeds[0] not in (7, 50) and seeds[2] not in (3, 52)  # drawn from their own generators
     with pytest.raises(ValueError, match="reset_mask"):
         vec.reset(options={"reset_mask": np.array([1, 0, 0])})
 
