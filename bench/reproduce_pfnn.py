@@ -254,6 +254,7 @@ def reproduce_pfnn(out: Path, seeds: int = 32, duration: float | None = None, ti
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         with os.fdopen(fd, "w") as handle:
             handle.write(data)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     return out
 
