@@ -11,11 +11,13 @@ spread over the window, node 0's known moves between them (its own integrated VO
 "VIO + compass" displacement of §3.3), altitudes taken level (the swarm flies at one
 nominal altitude; our world has no barometer). Both mirror images are computed (node 0's
 move is usually straight, which leaves the reflection across it undetermined). (2) Each
-image is refined by Levenberg–Marquardt on *every* range of the window with the model
+image, also rotated about node 0 by k·360°/``yaw_starts`` (a short move leaves MDS-MAP's
+yaw uncertain and the cost has local minima), is refined by Levenberg–Marquardt on
+*every* range of the window with the model
 ‖pᵢ + Δᵢ(k) − pⱼ − Δⱼ(k)‖ = dᵢⱼ(k), where Δ(k) are the integrated displacements: the
 other UAVs move too (MDS-MAP assumes them still), and their world-frame motion fixes the
 yaw and the mirror. A weak prior keeps the altitudes level (σ ``altitude_sigma``). The
-image with the smaller final cost wins. (3) The state at the current step is pᵢ + Δᵢ(K)
+start with the smallest final cost wins. (3) The state at the current step is pᵢ + Δᵢ(K)
 with the latest VO velocity.
 
 Batch shapes: B episodes, N UAVs, K steps in the window.
@@ -45,6 +47,8 @@ class InitConfig:
     """Levenberg–Marquardt iterations of the refinement (0: MDS-MAP only, mirror by ``side=+1``)."""
     altitude_sigma: float = 1.0
     """Prior std of each UAV's altitude about node 0's [m] (level-flight prior)."""
+    yaw_starts: int = 8
+    """Refinement starts per mirror image: the MDS-MAP layout rotated about node 0 by k·360°/yaw_starts."""
 
     def __post_init__(self) -> None:
         if not self.window > 0:
@@ -55,6 +59,8 @@ class InitConfig:
             raise ValueError(f"refine_iters must be >= 0, got {self.refine_iters}")
         if not self.altitude_sigma > 0:
             raise ValueError(f"altitude_sigma must be > 0, got {self.altitude_sigma}")
+        if self.yaw_starts < 1:
+            raise ValueError(f"yaw_starts must be >= 1, got {self.yaw_starts}")
 
 
 def refine_with_odometry(p0: np.ndarray, D: np.ndarray, disp: np.ndarray, sigma: float, altitude_sigma: float,
@@ -191,13 +197,18 @@ class MdsMapInitializer:
                 except ValueError:  # node 0 did not move horizontally, or the range graph broke
                     p = np.zeros((N, 3))
                     p[1:, 0] = np.arange(1, N)
-                if cfg.refine_iters:
-                    p, c = refine_with_odometry(p, self.D[:, b], self.disp[:, b], self._sigma, cfg.altitude_sigma,
-                                                cfg.refine_iters)
-                else:
-                    c = 0.0 if side == 1 else np.inf
-                if c < best_cost:
-                    best, best_cost = p, c
+                if not cfg.refine_iters:
+                    if side == 1:
+                        best, best_cost = p, 0.0
+                    continue
+                for a in 2.0 * np.pi * np.arange(cfg.yaw_starts) / cfg.yaw_starts:
+                    # the layout rotated about node 0 (the origin) by a: a yaw error MDS-MAP may have made
+                    c_a, s_a = np.cos(a), np.sin(a)
+                    start = p @ np.array([[c_a, s_a, 0.0], [-s_a, c_a, 0.0], [0.0, 0.0, 1.0]])
+                    q, c = refine_with_odometry(start, self.D[:, b], self.disp[:, b], self._sigma,
+                                                cfg.altitude_sigma, cfg.refine_iters)
+                    if c < best_cost:
+                        best, best_cost = q, c
             out[b, :, :3] = best + self.disp[-1, b]
         out[..., 3:] = self._vel
         return out
