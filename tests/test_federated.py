@@ -121,10 +121,7 @@ def test_estimator_is_deterministic_batched_and_blind_to_truth(make):
 
 def test_followers_track_the_leaders_estimate_not_the_truth():
     """Shift the leader's GPS by a constant: its estimate moves, and the followers move with it."""
-    pos, truth = _episode(lambda: federated(leader_cov_in_R=True), [5], duration=60.0)
-    biased, _ = _episode(lambda: federated(leader_cov_in_R=True), [5], duration=60.0,
-                         sensors={"gps_sigma": (1.0, 10.0, 10.0)})
-    assert np.array_equal(pos, biased)  # same task, same answer
+    pos, _ = _episode(lambda: federated(leader_cov_in_R=True), [5], duration=60.0)
     spec = get_spec("GradualFault-v0", duration=60.0)
     world = World(spec, 1)
     x0 = world.reset([5]).copy()
