@@ -209,3 +209,21 @@ def test_training_is_deterministic_given_a_seed(tmp_path):
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert runs[0].episode_seeds == runs[1].episode_seeds
     assert any(not torch.equal(a[k], c[k]) for k in a)
+
+
+def test_reproduce_madrl_checks_its_arguments(tmp_path):
+    from swarmloc.bench.reproduce_madrl import reproduce_madrl
+
+    with pytest.raises(ValueError, match="seeds must be in"):
+        reproduce_madrl(tmp_path, seeds=0)
+    with pytest.raises(ValueError, match="traces must be in"):
+        reproduce_madrl(tmp_path, seeds=2, traces=3)
+    with pytest.raises(FileNotFoundError, match="swarmloc train mappo"):
+        reproduce_madrl(tmp_path, seeds=1, traces=1, weights=tmp_path / "missing.pt")
+
+
+def test_cli_registers_train_mappo_and_reproduce_madrl():
+    from swarmloc.bench import mappo_cli  # noqa: F401  (registers the subcommands)
+    from swarmloc.bench.cli_commands import GROUPS
+
+    assert "mappo" in GROUPS["train"] and "madrl" in GROUPS["reproduce"]
