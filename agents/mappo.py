@@ -1,24 +1,31 @@
 """MAPPO link trust (madrl §2.2–2.3): CTDE training on the native batched torchrl env.
 
-One readable file, CleanRL style. The *actor* (``ChannelActor`` in ``mappo_policy.py``)
-is the paper's 128–64 ReLU MLP applied to every channel of every UAV with the same
-weights: per channel it sees that channel's F = 11 features and outputs a trust logit μ;
-during training u ~ N(μ, σ²) and the applied trust is α = sigmoid(u) (the paper's
-sigmoid output layer; sampling the logit keeps PPO's log-probabilities exact, with no
-inverse squashing). The *critic* (``SwarmCritic``) is centralized: it sees the whole
-swarm (every UAV's channels and its filter state, the env's ``"state"``) during training
-only, and is permutation-invariant over UAVs (mean-pooled per-channel and per-UAV
-embeddings), so one critic trains across swarm sizes. Each channel is a decision with
-its own PPO ratio; it shares its UAV's advantage (per-UAV standard reward v0).
+CleanRL style: the configuration and the training loop are here, the torch modules in
+``mappo_nets.py``, the actor (all that evaluation needs) in ``mappo_policy.py``.
 
-Multi-task: one torchrl ``Collector`` per task (each on its own batched env), cycled
-per batch, so one policy learns NLOS, step NLOS, swarm sizes 2…8, cascaded faults and
-the ideal case. Episode seeds are training seeds (< 1_000_000), drawn deterministically
-from the run's seed. At execution the actor is deterministic (u = μ) and wrapped in
-adaptive Markov smoothing (madrl eq. 15–17): see ``mappo_policy.py``.
+* **Actor** (``ChannelActor``): the paper's 128–64 ReLU MLP applied to every channel of
+  every UAV with the same weights. Per channel it sees that channel's F = 11 features and
+  outputs a trust logit μ; the applied trust is α = sigmoid(u), u ~ N(μ, σ²) while
+  training (the paper's sigmoid output; sampling the logit keeps PPO's log-probabilities
+  exact, with no inverse squashing) and u = μ at execution. Each channel is a decision
+  with its own PPO ratio and its UAV's advantage (per-UAV standard reward v0).
+* **Exploration**: σ starts at 2 in logit space (α spans ≈ 0.04 … 0.99), because
+  isolating a faulty link only pays off close to α → 0 (R = R0/α), far from any initial
+  trust; each draw is held for ``noise_hold`` steps (1 s) so that it moves the filter's
+  error visibly instead of adding per-step jitter (``HeldNoise``).
+* **Critic** (``SwarmCritic``): centralized, training only. It sees the whole swarm (every
+  UAV's channels, the env's ``"state"``, and — privileged, since it never runs at
+  execution — each UAV's position error) and is permutation-invariant over UAVs, so one
+  critic trains across swarm sizes.
+* **Multi-task**: one torchrl ``Collector`` per task (each on its own batched env), cycled
+  per batch: NLOS, step NLOS, swarm sizes 2…8, cascaded faults, the ideal case. Episode
+  seeds are training seeds (< 1_000_000) drawn deterministically from the run's seed.
 
-Run: ``swarmloc train mappo --frames 2000000`` (``swarmloc.bench.train_cli``) or
-``python -m swarmloc.agents.mappo --frames 400`` (no dev-seed evaluation).
+At execution the actor is deterministic and wrapped in adaptive Markov smoothing
+(madrl eq. 15–17), see ``mappo_policy.py``.
+
+Run: ``swarmloc train mappo --frames 1000000`` (``swarmloc.bench.train_cli``: seed checks,
+dev-seed evaluation, provenance) or ``python -m swarmloc.agents.mappo --frames 1600``.
 """
 
 from __future__ import annotations
@@ -31,14 +38,14 @@ from typing import Callable
 
 import numpy as np
 import torch
-from torch import nn
 
 from swarmloc.envs import torchrl_env
-from swarmloc.envs.observation import N_FEATURES, VALID, squash
+from swarmloc.envs.observation import N_FEATURES, VALID
 from swarmloc.envs.reward import RewardWeights
 from swarmloc.envs.tasks import get_spec
 
-from .mappo_policy import ChannelActor, MappoPolicy, count_flops_per_channel
+from .mappo_nets import G, build_modules
+from .mappo_policy import MappoPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
 #: the training mixture (madrl Exp. 1, 2/4/6, 3, 5)
@@ -51,7 +58,6 @@ TRAINING_SEED_LIMIT = 1_000_000
 #: where the per-UAV reward terms live in the env's tensordict, and their TensorBoard names
 REWARD_TERMS = {"accuracy": "reward_accuracy", "delay_penalty": "reward_delay", "energy_penalty": "reward_energy",
                 "jitter_penalty": "reward_jitter", "position_error": "position_error", "delay_ms": "delay_ms"}
-G = "uav"  # the env's agent group
 
 
 @dataclass
@@ -145,191 +151,6 @@ class MappoConfig:
         if self.accuracy_only:
             extra.update(delay=0.0, energy=0.0, jitter=0.0)
         return RewardWeights(**extra)
-
-
-# --------------------------------------------------------------------------- networks
-
-
-class SwarmCritic(nn.Module):
-    """Centralized per-UAV value V_i(s) from the global state, permutation-invariant over UAVs.
-
-    Channel embeddings φ(o_ij) are mean- and max-pooled over each UAV's present channels
-    (so channel order and count do not matter), joined with the UAV's filter state from
-    the env's ``"state"`` (speed and prior position std, squashed) into a UAV embedding
-    e_i; the swarm context is the mean of e_j over UAVs. V_i = ψ(e_i, mean_j e_j).
-    Permuting the UAVs permutes the values and nothing else.
-
-    With ``privileged=True`` each UAV's embedding also gets its true position error of
-    the last update (the env's ``("uav", "info", "position_error")``) — truth the critic
-    may see because it only exists during training (CTDE); the actor never does. The
-    accuracy reward is a function of that error, so the value baseline gets much sharper.
-
-    Args:
-        n_features: F.
-        width: embedding width.
-        privileged: also read the per-UAV position error.
-    """
-
-    def __init__(self, n_features: int = N_FEATURES, width: int = 128, privileged: bool = True) -> None:
-        super().__init__()
-        half = width // 2
-        self.privileged = privileged
-        n_uav_features = 4 if privileged else 2
-        self.channel = nn.Sequential(nn.Linear(n_features, width), nn.ReLU(), nn.Linear(width, half), nn.ReLU())
-        self.uav = nn.Sequential(nn.Linear(2 * half + n_uav_features, width), nn.ReLU(), nn.Linear(width, half),
-                                 nn.ReLU())
-        self.head = nn.Sequential(nn.Linear(2 * half, width), nn.ReLU(), nn.Linear(width, 1))
-
-    def forward(self, obs: torch.Tensor, state: torch.Tensor, error: torch.Tensor | None = None) -> torch.Tensor:
-        """Values ``(..., N, 1)`` from observations ``(..., N, L, F)``, state ``(..., S)`` and,
-        when privileged, the position errors ``(..., N, 1)`` [m]."""
-        n, n_l, n_f = obs.shape[-3:]
-        lead = obs.shape[:-3]
-        # state = [obs (N·L·F), prior position (3N), velocity (3N), position std (N)]
-        tail = state[..., n * n_l * n_f:]
-        if tail.shape[-1] != 7 * n:
-            raise ValueError(f"state has {state.shape[-1]} entries; expected N·L·F + 7N = {n * n_l * n_f + 7 * n}")
-        speed = tail[..., 3 * n:6 * n].reshape(*lead, n, 3).norm(dim=-1)
-        pos_std = tail[..., 6 * n:7 * n]
-        features = [squash(speed, 1.0), squash(pos_std, 1.0)]
-        if self.privileged:
-            if error is None:
-                raise ValueError("a privileged SwarmCritic needs the per-UAV position error")
-            err = error[..., 0]
-            features += [squash(err, 1.0), torch.exp(-0.5 * err**2)]  # the latter: last step's accuracy reward
-        uav_state = torch.stack(features, dim=-1)  # (..., N, 2 or 4)
-        valid = obs[..., VALID:VALID + 1]  # (..., N, L, 1)
-        h = self.channel(obs)
-        h_mean = (h * valid).sum(-2) / valid.sum(-2).clamp(min=1.0)
-        h_max = (h * valid).amax(-2)  # embeddings are ≥ 0 (ReLU), so absent channels never win
-        e = self.uav(torch.cat([h_mean, h_max, uav_state], dim=-1))  # (..., N, half)
-        context = e.mean(-2, keepdim=True).expand_as(e)
-        return self.head(torch.cat([e, context], dim=-1))
-
-
-class MaskedNormal(torch.distributions.Normal):
-    """Gaussian on the trust logit; absent channels carry no decision (log-prob and entropy 0).
-
-    Args:
-        loc, scale: ``(..., L)`` mean and std of the logit.
-        valid: ``(..., L)`` bool, measurement present.
-    """
-
-    def __init__(self, loc: torch.Tensor, scale: torch.Tensor, valid: torch.Tensor) -> None:
-        super().__init__(loc, scale, validate_args=False)
-        self.valid = valid
-
-    def log_prob(self, value: torch.Tensor) -> torch.Tensor:
-        return torch.where(self.valid, super().log_prob(value), torch.zeros_like(value))
-
-    def entropy(self) -> torch.Tensor:
-        return torch.where(self.valid, super().entropy(), torch.zeros_like(self.loc))
-
-    @property
-    def deterministic_sample(self) -> torch.Tensor:
-        return self.loc
-
-
-class HeldNoiseNormal(MaskedNormal):
-    """``MaskedNormal`` that samples u = μ + σ ε with a given standard-normal ε (held over steps).
-
-    The log-probability is the per-step Gaussian's, as for ``MaskedNormal``; only where the
-    noise comes from differs (see ``HeldNoise``).
-    """
-
-    def __init__(self, loc: torch.Tensor, scale: torch.Tensor, valid: torch.Tensor, noise: torch.Tensor) -> None:
-        super().__init__(loc, scale, valid)
-        self.noise = noise
-
-    def rsample(self, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
-        if len(sample_shape):
-            raise ValueError("HeldNoiseNormal draws one sample per step (its noise is given)")
-        return self.loc + self.scale * self.noise
-
-    def sample(self, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
-        with torch.no_grad():
-            return self.rsample(sample_shape)
-
-
-class HeldNoise(nn.Module):
-    """Exploration noise ε ~ N(0, 1) per channel, redrawn every ``hold`` policy calls.
-
-    Trust acts on the filter through its error, which builds up over many steps: a
-    perturbation held for ``hold`` steps changes the error (and the reward) clearly,
-    while per-step noise mostly adds jitter. ``start_batch()`` is called before every
-    collector batch, so blocks align with batches (and, as ``hold`` divides the
-    rollout length and the rollout length divides the episode length, with episodes).
-    Draws come from torch's global generator (deterministic under ``torch.manual_seed``).
-
-    Args:
-        hold: steps a draw is kept (1 = independent noise every step).
-    """
-
-    def __init__(self, hold: int) -> None:
-        super().__init__()
-        self.hold = hold
-        self._eps: torch.Tensor | None = None
-        self._calls = 0
-
-    def start_batch(self) -> None:
-        self._eps, self._calls = None, 0
-
-    def forward(self, loc: torch.Tensor) -> torch.Tensor:
-        if self._eps is None or self._eps.shape != loc.shape or self._calls % self.hold == 0:
-            self._eps = torch.randn(loc.shape)
-        self._calls += 1
-        return self._eps
-
-
-class _ActorParams(nn.Module):
-    """``ChannelActor`` → (μ, σ, valid) per channel, the inputs of ``MaskedNormal``."""
-
-    def __init__(self, actor: ChannelActor) -> None:
-        super().__init__()
-        self.actor = actor
-
-    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        loc = self.actor(obs)
-        return loc, self.actor.log_std.exp().expand_as(loc), obs[..., VALID] > 0.5
-
-
-def _logit_to_trust(logit: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """α = sigmoid(u) on present channels, 1 on absent ones (as ``MappoPolicy`` does)."""
-    return torch.where(valid, torch.sigmoid(logit), torch.ones_like(logit))
-
-
-def build_modules(cfg: MappoConfig) -> tuple:
-    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module.
-
-    Returns:
-        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise),
-        critic TensorDictModule, the HeldNoise module)``.
-    """
-    # torchrl is imported here, not at the top, so that the CLI can read MappoConfig quickly
-    from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
-    from torchrl.envs.utils import ExplorationType
-    from torchrl.modules import ProbabilisticActor
-
-    actor_net = ChannelActor(N_FEATURES, cfg.hidden, cfg.init_trust, cfg.init_log_std)
-    params = TensorDictModule(_ActorParams(actor_net), in_keys=[(G, "observation")],
-                              out_keys=[(G, "loc"), (G, "scale"), (G, "valid")])
-    prob_actor = ProbabilisticActor(
-        params, in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid")},
-        out_keys=[(G, "trust_logit")], distribution_class=MaskedNormal, return_log_prob=True,
-        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[(G, "action")])
-    # acting: the same parameters, with exploration noise held over cfg.noise_hold steps
-    noise = HeldNoise(cfg.noise_hold)
-    sample = ProbabilisticTensorDictModule(
-        in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
-        out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
-        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    policy = TensorDictSequential(params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]),
-                                  sample, to_trust)
-    critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
-    critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,
-                              out_keys=[(G, "state_value")])
-    return actor_net, prob_actor, policy, critic, noise
 
 
 # --------------------------------------------------------------------------- boilerplate

@@ -103,7 +103,7 @@ def test_policy_runs_on_tasks_of_different_shapes():
 
 def test_critic_permutation_invariant_over_uavs():
     """Permuting the UAVs (and every UAV's peer channels) permutes the per-UAV values; the swarm mean is unchanged."""
-    from swarmloc.agents.mappo import SwarmCritic
+    from swarmloc.agents.mappo_nets import SwarmCritic
 
     torch.manual_seed(0)
     n, n_anchor = 5, 3
