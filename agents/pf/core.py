@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL
+from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER
 from swarmloc.envs.rng import Stream, uniform
 
 # ---------------------------------------------------------------- random-number keys
@@ -58,8 +58,11 @@ PAIR_FLOPS = 4 * _T + 4
 PREDICT_PARTICLE_FLOPS = 2 * PAIR_FLOPS + 6 + 15 + 6 + _T + 6
 #: one range channel (anchor / peer) of one particle: Δ (3), ‖·‖ (5 + sqrt), residual² / σ² (4)
 RANGE_CHANNEL_FLOPS = 12 + _T
-#: one 3-vector channel (landmark / GPS / relative position) of one particle: 3·(2 sub + sq + add) + scale
-VECTOR_CHANNEL_FLOPS = 14
+#: one 3-vector channel (landmark / GPS / relative position), once per UAV-step: its share of
+#: S and Σ c/σ² (1 + 3·3); the mean μ costs 3 more per UAV-step (counted here per channel)
+VECTOR_CHANNEL_FLOPS = 13
+#: the completed-square term −½ S ‖p − μ‖² of one particle (3 sub, 3 sq, 2 add, 2 mul)
+VECTOR_PARTICLE_FLOPS = 10
 #: normalisation of one particle: max, exp, sum, subtract, ESS (2), weighted mean (12)
 NORMALIZE_PARTICLE_FLOPS = 4 + _T + 2 + 12
 #: systematic resampling + roughening of one output particle: cumsum, u_j (2), compare (2), 3 pairs, 6 adds
