@@ -236,10 +236,6 @@ class TrustEnvBatch:
     # ------------------------------------------------------------------ dynamics
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> CoreStep:
         """Start the episodes in ``mask`` (all if None) with integer ``seeds`` ``(B,)``."""
-        # World.reset keeps the previous episode's IMU reading, and the core takes the first
-        # jerk feature against it: clear it, so an episode depends on its seed only (as in a
-        # fresh core, whose buffer starts at zero).
-        self.core.world.buffers.imu[slice(None) if mask is None else np.asarray(mask, dtype=bool)] = 0.0
         return self._serially(self.core.reset, seeds, mask)
 
     def step(self, trust: np.ndarray) -> tuple[CoreStep, RewardTerms]:

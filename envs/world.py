@@ -344,6 +344,11 @@ class World:
         _reset_kernel(self.seeds[idx], self._traj_kind, self._traj_prm, self.spec.sensors.imu_bias_sigma,
                       f.init_pos_sigma, f.init_vel_sigma, pos, vel, bias, x0)
         buf.pos[idx], buf.vel[idx], self.imu_const_bias[idx], self.x0[idx] = pos, vel, bias, x0
+        # nothing of the previous episode may leak into the next (the first jerk feature
+        # is ‖u(1) − u(0)‖ with u(0) = 0)
+        buf.imu[idx] = 0.0
+        buf.z[idx] = 0.0
+        buf.injected[idx] = 0.0
         buf.valid[idx] = False
         buf.label[idx] = False
         if buf.velocity is not None:

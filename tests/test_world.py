@@ -158,3 +158,18 @@ def test_spec_json_roundtrip_all_tasks():
         again = TaskSpec.model_validate_json(spec.model_dump_json())
         assert again == spec
         assert json.loads(spec.model_dump_json())["name"] == spec.name
+
+
+def test_reset_leaves_nothing_of_the_previous_episode():
+    """A reset episode is identical whether or not another episode ran before it."""
+    spec = get_spec("swarmloc/NLOS-v0", duration=5.0)
+    fresh = LinkTrustCore(spec, 1)
+    first = fresh.reset([7])
+    jerk_fresh, resid_fresh = first.jerk.copy(), first.resid.copy()
+    used = LinkTrustCore(spec, 1)
+    used.reset([3])
+    for _ in range(20):
+        used.step(np.full((1, spec.n_uav, spec.n_channels), 0.5))
+    again = used.reset([7])
+    assert np.array_equal(again.jerk, jerk_fresh)
+    assert np.array_equal(again.resid, resid_fresh)
