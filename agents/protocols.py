@@ -344,6 +344,15 @@ class Estimator(Protocol):
         ...
 
 
+class UnsupportedTask(ValueError):
+    """A method cannot run a task at all (e.g. an IMM filter on a task without GPS).
+
+    Raise it from ``reset`` (the runner also treats a ``ValueError`` or
+    ``NotImplementedError`` raised by ``reset`` this way); the runner then records the
+    task's episodes with null metrics and reports the reason, instead of aborting.
+    """
+
+
 def is_privileged(method: object) -> bool:
     """Whether ``method`` declares itself privileged (``privileged`` attribute, default False)."""
     return bool(getattr(method, "privileged", False))
@@ -362,6 +371,7 @@ __all__ = [
     "PrivilegedInfo",
     "TaskFacts",
     "TrustInput",
+    "UnsupportedTask",
     "episode_keys",
     "is_deterministic",
     "is_privileged",

@@ -256,8 +256,10 @@ def run_evaluate(cfg: EvaluateCommand) -> int:
     for task, per_metric in results.aggregates.items():
         rmse = per_metric["rmse"]
         score = per_metric["normalized_score"]
-        console.print(f"  {task:34s} RMSE {rmse.mean if rmse else float('nan'):8.3f} m   "
-                      f"score {'—' if score is None else f'{score.mean:7.3f}'}")
+        if rmse is None:
+            console.print(f"  {task:34s} [yellow]not run[/yellow]: the method cannot run this task")
+            continue
+        console.print(f"  {task:34s} RMSE {rmse.mean:8.3f} m   score {'—' if score is None else f'{score.mean:7.3f}'}")
     overall = aggregate_across_tasks(results.episodes, "normalized_score")
     if overall is not None:
         console.print(f"normalized score {overall.mean:.3f} (IQM {overall.iqm:.3f}, 95% CI "

@@ -33,14 +33,14 @@ class SummaryRow:
     method: str
     track: str
     privileged: bool
+    tasks: str  # tasks run / tasks in the suite
     score: tuple[float, float, float, float] | None  # mean, IQM, CI low, CI high
-    rmse: float
     delay_ms: float | None
     energy_mj: float | None
     jitter: float | None
     weight_var: float | None
     detection: float | None
-    diverged: float
+    diverged: float | None
 
 
 def _mean(results: Results, metric: str) -> float | None:
@@ -55,11 +55,12 @@ def summarize_results(results: Results) -> SummaryRow:
     energy = _mean(results, "energy_j")
     return SummaryRow(
         method=results.method.name, track=results.method.track, privileged=results.method.privileged,
+        tasks=f"{sum(agg['rmse'] is not None for agg in results.aggregates.values())}/{len(results.aggregates)}",
         score=None if score is None else (score.mean, score.iqm, score.ci_low, score.ci_high),
-        rmse=float(_mean(results, "rmse") or 0.0), delay_ms=_mean(results, "delay_ms"),
+        delay_ms=_mean(results, "delay_ms"),
         energy_mj=None if energy is None else 1e3 * energy, jitter=_mean(results, "jitter"),
         weight_var=_mean(results, "weight_var"), detection=_mean(results, "anomaly_detection_rate"),
-        diverged=float(_mean(results, "diverged") or 0.0),
+        diverged=_mean(results, "diverged"),
     )
 
 
@@ -77,59 +78,76 @@ def _ordered(all_results: dict[str, Results]) -> list[Results]:
     return [r for r in items if not r.method.privileged] + [r for r in items if r.method.privileged]
 
 
+def task_label(task: str) -> str:
+    """Column label of a task: ``swarmloc/NLOS-v0`` → ``NLOS``."""
+    return short_name(task).removesuffix("-v0")
+
+
 def rmse_rows(all_results: dict[str, Results]) -> tuple[list[str], list[list[str]]]:
-    """Header and rows of the per-task mean-RMSE table (privileged methods marked †)."""
+    """Header (tasks) and rows (methods; privileged marked †) of the mean-RMSE table."""
     ordered = _ordered(all_results)
-    header = ["task"] + [r.method.name + ("†" if r.method.privileged else "") for r in ordered]
     tasks = list(dict.fromkeys(e.task for r in ordered for e in r.episodes))
+    header = ["method"] + [task_label(t) for t in tasks]
     rows = []
-    for task in tasks:
-        cells = [short_name(task)]
-        for r in ordered:
+    for r in ordered:
+        cells = [r.method.name + ("†" if r.method.privileged else "")]
+        for task in tasks:
             agg = r.aggregates.get(task, {}).get("rmse")
-            cells.append(_fmt(None if agg is None else agg.mean))
+            cells.append(_fmt(None if agg is None else agg.mean, 3 if agg is None or agg.mean < 100 else 1))
         rows.append(cells)
     return header, rows
 
 
-SUMMARY_HEADER = ["method", "track", "score", "IQM", "95% CI", "RMSE [m]", "delay [ms]", "energy [mJ]",
-                  "jitter", "α var", "detect", "diverged"]
+SUMMARY_HEADER = ["method", "track", "tasks", "score", "IQM", "95% CI", "ms/step", "mJ/UAV", "jitter", "α var",
+                  "detect", "diverged"]
 
 
 def summary_cells(row: SummaryRow) -> list[str]:
     """Cells of one summary line (see :data:`SUMMARY_HEADER`)."""
     s = row.score
-    return [row.method + ("†" if row.privileged else ""), row.track,
+    return [row.method + ("†" if row.privileged else ""), row.track, row.tasks,
             _fmt(s[0]) if s else "—", _fmt(s[1]) if s else "—",
-            f"[{_fmt(s[2])}, {_fmt(s[3])}]" if s else "—", _fmt(row.rmse), _fmt(row.delay_ms, 4),
+            f"[{_fmt(s[2], 2)}, {_fmt(s[3], 2)}]" if s else "—", _fmt(row.delay_ms, 4),
             _fmt(row.energy_mj), _fmt(row.jitter), _fmt(row.weight_var), _fmt(row.detection),
-            f"{100 * row.diverged:.0f}%"]
+            "—" if row.diverged is None else f"{100 * row.diverged:.0f}%"]
+
+
+def _ranked(all_results: dict[str, Results]) -> tuple[list[SummaryRow], list[SummaryRow]]:
+    """Summary rows: public methods by mean normalized score (best first), then privileged ones."""
+    rows = [summarize_results(r) for r in _ordered(all_results)]
+    public = sorted([r for r in rows if not r.privileged], key=lambda r: -(r.score[0] if r.score else -np.inf))
+    return public, [r for r in rows if r.privileged]
 
 
 def print_tables(all_results: dict[str, Results], console: Console, suite: Suite) -> None:
-    """Print the per-task RMSE table and the per-method summary (privileged apart)."""
+    """Print the mean-RMSE table (methods × tasks, split to fit the width) and the summary."""
     header, rows = rmse_rows(all_results)
     n_seeds = len(suite.seeds(suite.tasks[0]))
-    t1 = Table(title=f"mean RMSE [m] per task — suite {suite.name}, {n_seeds} seeds per task "
-                     f"(† privileged: reads fault labels, not ranked)", title_style="bold")
     n_public = sum(not r.method.privileged for r in all_results.values())
-    for j, name in enumerate(header):
-        style = "dim italic" if j > n_public else None
-        t1.add_column(name, justify="left" if j == 0 else "right", style=style)
-    for cells in rows:
-        t1.add_row(*cells)
-    console.print(t1)
+    name_width = max(len(cells[0]) for cells in rows) + 3
+    per_table = max(1, (console.width - name_width - 4) // 10)
+    task_cols = list(range(1, len(header)))
+    chunks = [task_cols[i:i + per_table] for i in range(0, len(task_cols), per_table)]
+    for c, cols in enumerate(chunks):
+        part = f" ({c + 1}/{len(chunks)})" if len(chunks) > 1 else ""
+        table = Table(title=f"mean RMSE [m] — suite {suite.name}, {n_seeds} seeds per task{part}; "
+                            "† privileged (reads fault labels), not ranked; — not run", title_style="bold")
+        table.add_column("method", no_wrap=True)
+        for j in cols:
+            table.add_column(header[j], justify="right", max_width=8, overflow="fold")
+        for i, cells in enumerate(rows):
+            if i == n_public:
+                table.add_section()
+            table.add_row(cells[0], *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
+        console.print(table)
     t2 = Table(title="summary over all episodes — normalized score: 0 = uniform CEKF, 1 = privileged oracle "
                      "(mean, IQM, stratified bootstrap 95% CI; tasks without labelled faults have none)",
                title_style="bold")
     for j, name in enumerate(SUMMARY_HEADER):
-        t2.add_column(name, justify="left" if j < 2 else "right")
-    rows2 = [summarize_results(r) for r in _ordered(all_results)]
-    public = [r for r in rows2 if not r.privileged]
-    public.sort(key=lambda r: -(r.score[0] if r.score else -np.inf))
+        t2.add_column(name, justify="left" if j < 2 else "right", no_wrap=j in (0, 5))
+    public, privileged = _ranked(all_results)
     for r in public:
         t2.add_row(*summary_cells(r))
-    privileged = [r for r in rows2 if r.privileged]
     if privileged:
         t2.add_section()
         for r in privileged:
@@ -141,16 +159,15 @@ def markdown_tables(all_results: dict[str, Results], suite: Suite) -> str:
     """The two tables as Markdown (for ``summary.md`` and the README)."""
     header, rows = rmse_rows(all_results)
     lines = [f"Mean RMSE [m] per task (suite `{suite.name}`, {len(suite.seeds(suite.tasks[0]))} seeds per task; "
-             "† privileged, not ranked):", "",
+             "† privileged, not ranked; — not run):", "",
              "| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
     lines += ["| " + " | ".join(cells) + " |" for cells in rows]
-    rows2 = [summarize_results(r) for r in _ordered(all_results)]
-    public = sorted([r for r in rows2 if not r.privileged], key=lambda r: -(r.score[0] if r.score else -np.inf))
-    lines += ["", "Summary over all episodes (normalized score: 0 = uniform CEKF, 1 = privileged oracle):", "",
+    public, privileged = _ranked(all_results)
+    lines += ["", "Summary over all episodes (normalized score: 0 = uniform CEKF, 1 = privileged oracle; mean, IQM, "
+              "stratified bootstrap 95% CI):", "",
               "| " + " | ".join(SUMMARY_HEADER) + " |",
               "|" + "|".join(["---", "---"] + ["---:"] * (len(SUMMARY_HEADER) - 2)) + "|"]
-    lines += ["| " + " | ".join(summary_cells(r)) + " |" for r in public]
-    lines += ["| " + " | ".join(summary_cells(r)) + " |" for r in rows2 if r.privileged]
+    lines += ["| " + " | ".join(summary_cells(r)) + " |" for r in public + privileged]
     return "\n".join(lines) + "\n"
 
 
@@ -184,7 +201,10 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
     Returns:
         method → its ``Results``.
     """
-    console = console or Console()
+    if console is None:
+        console = Console()
+        if not console.is_terminal:  # a pipe or file: do not squeeze the tables into 80 columns
+            console.width = max(console.width, 150)
     started = time.perf_counter()
     methods = loadable_methods(methods, console)
     out.mkdir(parents=True, exist_ok=True)
@@ -195,6 +215,11 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
     all_results: dict[str, Results] = {}
     paths = []
     for name, run in runs.items():
+        if run.unsupported:
+            tasks = ", ".join(short_name(t) for t in run.unsupported)
+            first = next(iter(run.unsupported.values()))
+            console.print(f"[yellow]{run.loaded.name} not run on {len(run.unsupported)} task(s)[/yellow] ({tasks}): "
+                          f"{first}")
         results = run.results(suite)
         path = out / "results" / f"{run.loaded.name}.json"
         write_results(path, results)

@@ -38,12 +38,13 @@ from swarmloc.agents.protocols import (
     PrivilegedInfo,
     TaskFacts,
     TrustInput,
+    UnsupportedTask,
     episode_keys,
 )
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench import metrics as M
 from swarmloc.bench.alignment import align_estimates
-from swarmloc.bench.results import MethodInfo, Results, SuiteInfo, make_results, write_results
+from swarmloc.bench.results import METRIC_NAMES, MethodInfo, Results, SuiteInfo, make_results, write_results
 from swarmloc.bench.suites import Suite, require_data
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.observation import build_observation, kind_one_hot
@@ -299,6 +300,16 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
     return view
 
 
+def _reset_or_unsupported(loaded: LoadedMethod, spec: TaskSpec, reset: Callable[[], None]) -> None:
+    """Call a method's reset; a refusal (ValueError / NotImplementedError) means "cannot run this task"."""
+    try:
+        reset()
+    except UnsupportedTask:
+        raise
+    except (ValueError, NotImplementedError) as err:
+        raise UnsupportedTask(f"{loaded.name} cannot run {spec.task_id}: {err}") from err
+
+
 def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, trace: bool) -> tuple[_Recorder, Any]:
     """Run a Track A policy on B episodes through ``LinkTrustCore``."""
     policy = loaded.method
@@ -306,7 +317,7 @@ def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, tra
     core = LinkTrustCore(spec, n_b)
     cs = core.reset(seeds)
     layout = core.layout
-    policy.reset(n_b, layout, episode_keys(seeds))
+    _reset_or_unsupported(loaded, spec, lambda: policy.reset(n_b, layout, episode_keys(seeds)))
     one_hot = kind_one_hot(layout.kind)
     obs = None
     fpc = float(getattr(policy, "flops_per_channel", 0.0))
@@ -353,7 +364,7 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
     world = make_world(spec, n_b)
     x0 = world.reset(seeds).copy()
     facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds), anchors=world.anchors)
-    est.reset(facts, facts.x0)
+    _reset_or_unsupported(loaded, spec, lambda: est.reset(facts, facts.x0))
     shape = (n_b, spec.n_uav, world.layout.n_channels)
     rec: _Recorder | None = None
     previous: np.ndarray | None = None
@@ -444,12 +455,14 @@ class TaskOutcome:
         task: task ID; seeds: the seeds, in order.
         episodes: method → one metrics dict per seed.
         traces: method → trace of the first seed (when requested).
+        unsupported: method → why it cannot run this task (its metrics are all null).
     """
 
     task: str
     seeds: list[int]
     episodes: dict[str, list[dict[str, float | None]]] = field(default_factory=dict)
     traces: dict[str, Trace] = field(default_factory=dict)
+    unsupported: dict[str, str] = field(default_factory=dict)
 
 
 def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[int], *,
@@ -472,7 +485,12 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
     weights = weights or {}
     for text in methods:
         loaded = load_method(text, weights.get(text))
-        metrics, tr = rollout(loaded, spec, seeds, trace=trace)
+        try:
+            metrics, tr = rollout(loaded, spec, seeds, trace=trace)
+        except UnsupportedTask as err:
+            outcome.unsupported[text] = str(err)
+            outcome.episodes[text] = [{name: None for name in METRIC_NAMES} for _ in seeds]
+            continue
         outcome.episodes[text] = metrics
         if tr is not None:
             outcome.traces[text] = tr
@@ -484,7 +502,8 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
     oracle = reference_rmse(REFERENCE_ORACLE, spec, seeds)
     for metrics in outcome.episodes.values():
         for m, u, o in zip(metrics, uniform, oracle):
-            m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
+            if m["rmse"] is not None:
+                m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
     return outcome
 
 
@@ -545,12 +564,14 @@ class MethodRun:
         episodes: ``[{"task", "seed", "metrics"}]`` in suite order.
         traces: first-seed traces per task.
         weights: the weights file, if any.
+        unsupported: task → why the method cannot run it (null metrics there).
     """
 
     loaded: LoadedMethod
     episodes: list[dict[str, Any]]
     traces: list[Trace]
     weights: str | None = None
+    unsupported: dict[str, str] = field(default_factory=dict)
 
     def results(self, suite: Suite) -> Results:
         """Assemble the results file (aggregates, provenance) of this run."""
@@ -632,7 +653,9 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
             episodes += [{"task": task, "seed": s, "metrics": met} for s, met in zip(out.seeds, out.episodes[m])]
             if m in out.traces:
                 traces.append(out.traces[m])
-        runs[m] = MethodRun(loaded=loaded[m], episodes=episodes, traces=traces, weights=weights.get(m))
+        unsupported = {t: outcomes[t].unsupported[m] for t in suite.tasks if m in outcomes[t].unsupported}
+        runs[m] = MethodRun(loaded=loaded[m], episodes=episodes, traces=traces, weights=weights.get(m),
+                            unsupported=unsupported)
     return runs
 
 

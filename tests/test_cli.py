@@ -92,7 +92,7 @@ def test_demo_tables(tmp_path):
     results = run_demo(["uniform", "chi2-soft", "oracle"], suite, tmp_path, workers=1, plots=False,
                        console=console)
     text = console.export_text()
-    assert "NLOSStep-v0" in text and "oracle†" in text
+    assert "NLOSStep" in text and "oracle†" in text
     md = (tmp_path / "summary.md").read_text()
     assert "| chi2-soft | A |" in md and md.rstrip().splitlines()[-1].startswith("| oracle† |")
     assert sorted(p.name for p in (tmp_path / "results").glob("*.json")) == ["chi2-soft.json", "oracle.json",

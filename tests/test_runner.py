@@ -126,3 +126,19 @@ def test_bad_arguments():
         evaluate_methods(["nope"], _tiny_suite())
     with pytest.raises(ValueError, match="seeds must be >= 0"):
         rollout(load_method("uniform"), get_spec("swarmloc/Ideal-v0", duration=0.5), [-1])
+
+
+class _NeedsGps(DeadReckoning):
+    def reset(self, facts, x0):
+        raise ValueError("this estimator needs GPS")
+
+
+def test_unsupported_task_gives_null_metrics(monkeypatch):
+    import swarmloc.bench.runner as runner
+
+    real_load = runner.load_method
+    monkeypatch.setattr(runner, "load_method",
+                        lambda text, weights=None: _as_loaded(_NeedsGps()) if text == "needs-gps" else real_load(text))
+    out = evaluate_task(["needs-gps"], get_spec("swarmloc/Ideal-v0", duration=0.5), [1, 2])
+    assert out.unsupported["needs-gps"].endswith("this estimator needs GPS")
+    assert all(v is None for m in out.episodes["needs-gps"] for v in m.values())
