@@ -59,6 +59,7 @@ class MethodEntry:
 
 _A = "swarmloc.agents.classical"
 _M = "swarmloc.agents.mappo_policy"
+_P = "swarmloc.agents.pf.filters"
 #: every shipped method, in display order
 REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("uniform", f"{_A}:uniform_policy", "A", False, True, "standard CEKF, α = 1 (score 0)"),
@@ -85,6 +86,12 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "anchor-free CI-EKF + χ² UWB adaptive adjustment, MDS-MAP init (dtvirm)"),
     MethodEntry("ci-ekf-no-aa", "swarmloc.agents.ci_ekf:ci_ekf_no_aa", "B", False, True,
                 "CI-EKF without the UWB adaptive adjustment (dtvirm ablation)"),
+    MethodEntry("pf", f"{_P}:make_pf", "B", False, True, "particle filter, 500 particles (pf-nn Table 4)"),
+    MethodEntry("pf-800", f"{_P}:make_pf800", "B", False, True, "particle filter, 800 particles"),
+    MethodEntry("adaptive-pf", f"{_P}:make_adaptive_pf", "B", False, True,
+                "ESS-adaptive particle count in [100, 800] (pf-nn §3.3)"),
+    MethodEntry("pf-nn", f"{_P}:make_pfnn", "B", False, True,
+                "adaptive PF + 6–12–1 weight-correcting network, trained offline (pf-nn §3.4)"),
     MethodEntry("mappo", f"{_M}:mappo", "A", False, True, "MAPPO link trust (shipped weights) + Markov smoothing"),
     MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", False, True,
                 "MAPPO, raw α without smoothing (madrl Exp. 6)"),
