@@ -98,6 +98,8 @@ class MappoConfig:
     """rewards are multiplied by this before GAE (returns of order 1 for the critic)"""
     hidden: tuple[int, ...] = (128, 64)
     """actor hidden widths (madrl §2.2.2: 128, 64)"""
+    channel_context: bool = True
+    """each channel also sees its UAV's mean innovation and NIS (False: the paper's per-channel input only)"""
     critic_hidden: int = 64
     """critic embedding width"""
     privileged_critic: bool = True
@@ -187,21 +189,21 @@ class TrainResult:
     last_eval: dict[str, float]
 
 
-def probe_features() -> dict[str, torch.Tensor]:
-    """Fixed per-channel inputs whose trust is logged while training (is isolation being learned?).
+def probe_features() -> tuple[torch.Tensor, dict[str, int]]:
+    """A fixed UAV whose trust is logged while training (is isolation being learned?).
 
-    A clean and a faulty anchor and peer link (faulty: ≈3 m innovation, NIS ≈ 45), the
-    previous trust 0.8, features as ``build_observation`` scales them.
+    8 anchor and 3 peer links, all clean (innovation ≈ 0.1 m, NIS ≈ 0.5) except one
+    faulty anchor and one faulty peer (≈ 3 m, NIS ≈ 45); previous trust 0.8; features as
+    ``build_observation`` scales them. Returns the ``(L, F)`` input and the logged channels.
     """
-    out = {}
-    for kind, column in (("anchor", 0), ("peer", 1)):
-        for name, innovation, nis in (("clean", 0.1, 0.1), ("faulty", 0.75, 0.9)):
-            x = torch.zeros(N_FEATURES)
-            x[:5] = torch.tensor([innovation, 0.6, 0.8, 0.1, nis])
-            x[5 + column] = 1.0
-            x[VALID] = 1.0
-            out[f"{kind}_{name}"] = x
-    return out
+    x = torch.zeros(11, N_FEATURES)
+    x[:, :5] = torch.tensor([0.1, 0.6, 0.8, 0.1, 0.1])
+    x[:8, 5] = 1.0  # anchors
+    x[8:, 6] = 1.0  # peers
+    x[:, VALID] = 1.0
+    for faulty in (0, 8):
+        x[faulty, 0], x[faulty, 4] = 0.75, 0.9
+    return x, {"anchor_faulty": 0, "anchor_clean": 1, "peer_faulty": 8, "peer_clean": 9}
 
 
 def _team_returns(reward: torch.Tensor, done: torch.Tensor, running: np.ndarray) -> list[float]:
@@ -275,7 +277,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                                     trust_policy=True, exploration_type=ExplorationType.RANDOM,
                                     auto_register_policy_transforms=False))
     iterators = [iter(c) for c in collectors]
-    probes = probe_features()
+    probe_x, probe_channels = probe_features()
     steps_done = [0] * len(cfg.tasks)
     running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
@@ -363,8 +365,9 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
             writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
         writer.add_scalar("charts/log_std", actor_net.log_std.item(), frames)
         with torch.no_grad():
-            for name, x in probes.items():
-                writer.add_scalar(f"probe/trust_{name}", actor_net.trust(x).item(), frames)
+            probe_trust = actor_net.trust(probe_x)
+        for name, index in probe_channels.items():
+            writer.add_scalar(f"probe/trust_{name}", probe_trust[index].item(), frames)
         writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
         sps = frames / max(time.time() - start, 1e-9)
         writer.add_scalar("charts/SPS", sps, frames)

@@ -182,7 +182,7 @@ def build_modules(cfg: "MappoConfig") -> tuple:
     from torchrl.envs.utils import ExplorationType
     from torchrl.modules import ProbabilisticActor
 
-    actor_net = ChannelActor(N_FEATURES, cfg.hidden, cfg.init_trust, cfg.init_log_std)
+    actor_net = ChannelActor(N_FEATURES, cfg.hidden, cfg.init_trust, cfg.init_log_std, cfg.channel_context)
     params = TensorDictModule(_ActorParams(actor_net), in_keys=[(G, "observation")],
                               out_keys=[(G, "loc"), (G, "scale"), (G, "valid")])
     prob_actor = ProbabilisticActor(

@@ -30,7 +30,7 @@ import torch
 from torch import nn
 
 from swarmloc.envs.channels import ChannelLayout
-from swarmloc.envs.observation import N_FEATURES, VALID
+from swarmloc.envs.observation import INNOVATION, N_FEATURES, NIS, VALID
 
 from .protocols import TrustInput
 from .smoothing import MarkovSmoothing
@@ -44,27 +44,51 @@ LOGIT_LIMIT = 8.0
 BETA_MAX, SMOOTHING_GAMMA = 0.85, 2.0
 
 
+#: per-UAV context appended to every channel: masked means of these features over the UAV's
+#: present channels (innovation, NIS) — how this link compares with the UAV's other links
+CONTEXT_FEATURES = (INNOVATION, NIS)
+
+
+def channel_context(obs: torch.Tensor) -> torch.Tensor:
+    """Per-UAV context ``(..., L, C)``: masked means over the UAV's present channels of ``CONTEXT_FEATURES``.
+
+    Args:
+        obs: ``(..., L, F)`` one UAV's channels (any leading dims).
+    """
+    valid = obs[..., VALID:VALID + 1]  # (..., L, 1)
+    feats = obs[..., list(CONTEXT_FEATURES)]  # (..., L, C)
+    mean = (feats * valid).sum(-2, keepdim=True) / valid.sum(-2, keepdim=True).clamp(min=1.0)
+    return mean.expand_as(feats)
+
+
 class ChannelActor(nn.Module):
     """Per-channel trust actor shared across channels and UAVs (madrl §2.2.2).
 
-    ``forward(obs)`` maps ``(..., F)`` features to the trust logit μ ``(...)``, soft-limited
-    to ±``LOGIT_LIMIT``; α_raw = sigmoid(μ). ``log_std`` is the state-independent
-    log σ of the training-time Gaussian on the logit (unused at execution).
+    ``forward(obs)`` maps one UAV's channels ``(..., L, F)`` to trust logits μ ``(..., L)``,
+    soft-limited to ±``LOGIT_LIMIT``; α_raw = sigmoid(μ). Every channel goes through the same
+    MLP; with ``context`` (default) its input is its own F features plus the UAV's
+    ``channel_context`` (mean innovation and NIS over the UAV's present channels): a
+    channel's innovation means little alone — it is large on every link when the UAV's own
+    estimate is off, and on one link when that link is faulty. The context is a
+    permutation-invariant pooling over the UAV's own channels, so the actor stays
+    decentralized and serves any L and N. ``log_std`` is the state-independent log σ of the
+    training-time Gaussian on the logit (unused at execution).
 
     Args:
         n_features: F.
         hidden: hidden layer widths (the paper: 128, 64).
         init_trust: α the untrained actor outputs (sets the last bias), in (0, 1).
         init_log_std: initial log σ of the logit noise.
+        context: append the UAV context (False: the paper's purely per-channel input).
     """
 
     def __init__(self, n_features: int = N_FEATURES, hidden: tuple[int, ...] = (128, 64), init_trust: float = 0.8,
-                 init_log_std: float = -0.5) -> None:
+                 init_log_std: float = -0.5, context: bool = True) -> None:
         super().__init__()
         if not 0.0 < init_trust < 1.0:
             raise ValueError(f"init_trust must be in (0, 1), got {init_trust!r}")
         layers: list[nn.Module] = []
-        width = n_features
+        width = n_features + (len(CONTEXT_FEATURES) if context else 0)
         for h in hidden:
             layers += [nn.Linear(width, h), nn.ReLU()]
             width = h
@@ -74,18 +98,21 @@ class ChannelActor(nn.Module):
         nn.init.constant_(head.bias, float(np.log(init_trust / (1.0 - init_trust))))
         self.body = nn.Sequential(*layers, head)
         self.log_std = nn.Parameter(torch.tensor(float(init_log_std)))
+        # a buffer, so that the weights file says which input the network expects
+        self.register_buffer("context", torch.tensor(bool(context)))
         self.n_features = n_features
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        """Trust logit μ ``(...)`` from features ``(..., F)``."""
-        if obs.shape[-1] != self.n_features:
-            raise ValueError(f"obs must end in F = {self.n_features} features, got shape {tuple(obs.shape)}")
-        raw = self.body(obs).squeeze(-1)
+        """Trust logits μ ``(..., L)`` from one UAV's channels ``(..., L, F)``."""
+        if obs.ndim < 2 or obs.shape[-1] != self.n_features:
+            raise ValueError(f"obs must have shape (..., L, F = {self.n_features}), got {tuple(obs.shape)}")
+        x = torch.cat([obs, channel_context(obs)], dim=-1) if bool(self.context) else obs
+        raw = self.body(x).squeeze(-1)
         # μ = c · tanh(raw / c): a smooth limit that keeps gradients, unlike a clamp
         return LOGIT_LIMIT * torch.tanh(raw / LOGIT_LIMIT)
 
     def trust(self, obs: torch.Tensor) -> torch.Tensor:
-        """Deterministic α_raw = sigmoid(μ) ``(...)`` in (0, 1)."""
+        """Deterministic α_raw = sigmoid(μ) ``(..., L)`` in (0, 1)."""
         return torch.sigmoid(self(obs))
 
 
@@ -115,8 +142,11 @@ def load_actor(weights: str | Path) -> ChannelActor:
     state = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(state, dict) or "body.0.weight" not in state:
         raise ValueError(f"{path} is not a ChannelActor state_dict (expected keys body.*, log_std)")
-    n_features = int(state["body.0.weight"].shape[1])
-    actor = ChannelActor(n_features=n_features, hidden=hidden_sizes(state))
+    # weights from before the context input carry no flag: they are purely per-channel
+    state.setdefault("context", torch.tensor(False))
+    context = bool(state["context"])
+    n_features = int(state["body.0.weight"].shape[1]) - (len(CONTEXT_FEATURES) if context else 0)
+    actor = ChannelActor(n_features=n_features, hidden=hidden_sizes(state), context=context)
     actor.load_state_dict(state)
     actor.eval()
     return actor
@@ -130,11 +160,13 @@ def count_flops_per_channel(actor: ChannelActor) -> float:
     """
     from torch.utils.flop_counter import FlopCounterMode
 
-    x = torch.zeros(1, actor.n_features)
+    x = torch.zeros(1, actor.n_features)  # one UAV with one channel
     with torch.no_grad(), FlopCounterMode(display=False) as counter:
         actor.trust(x)
     units = sum(m.out_features for m in actor.body if isinstance(m, nn.Linear))
-    return float(counter.get_total_flops() + 2 * units + 4)
+    # the context: per channel, one multiply-add per context feature into the means, plus the division
+    context = 3 * len(CONTEXT_FEATURES) if bool(actor.context) else 0
+    return float(counter.get_total_flops() + 2 * units + 4 + context)
 
 
 class MappoPolicy:

@@ -68,20 +68,27 @@ def test_train_cli_smoke(tmp_path):
     assert (tmp_path / "run" / "checkpoint.pt").is_file()
 
 
+@pytest.mark.parametrize("context", [True, False])
 @pytest.mark.parametrize("n,n_l", [(2, 9), (4, 6), (8, 15), (32, 39)])
-def test_policy_any_swarm_size_and_channel_count(n, n_l):
-    """One shared per-channel actor serves any N and L; α ∈ (0, 1]; a channel's α depends on its features only."""
+def test_policy_any_swarm_size_and_channel_count(n, n_l, context):
+    """One shared per-channel actor serves any N and L; α ∈ (0, 1]; channels and UAVs are exchangeable."""
     torch.manual_seed(0)
-    policy = MappoPolicy(ChannelActor())
+    policy = MappoPolicy(ChannelActor(context=context))
     rng = np.random.default_rng(n)
     obs = _random_obs(rng, 3, n, n_l)
     alpha = policy.act(_trust_input(obs))
     assert alpha.shape == (3, n, n_l) and alpha.dtype == np.float64
     assert np.all(alpha > 0.0) and np.all(alpha <= 1.0)
+    ch, uav = rng.permutation(n_l), rng.permutation(n)
+    permuted = policy.act(_trust_input(np.ascontiguousarray(obs[:, uav][:, :, ch])))
+    np.testing.assert_allclose(permuted, alpha[:, uav][:, :, ch], rtol=1e-6)
     moved = obs.copy()
-    moved[0, 0, 0, :5] = 1.0 - moved[0, 0, 0, :5]  # change one channel's features
+    moved[0, 0, 0, :5] = 1.0 - moved[0, 0, 0, :5]  # change one channel of UAV 0 in episode 0
     again = policy.act(_trust_input(moved))
-    assert np.array_equal(np.delete(again.ravel(), 0), np.delete(alpha.ravel(), 0))
+    np.testing.assert_array_equal(again[1:], alpha[1:])  # other episodes
+    np.testing.assert_array_equal(again[0, 1:], alpha[0, 1:])  # other UAVs: decentralized
+    if not context:  # the paper's purely per-channel input: the UAV's other channels are unaffected too
+        np.testing.assert_array_equal(again[0, 0, 1:], alpha[0, 0, 1:])
     absent = obs.copy()
     absent[..., 0, VALID] = 0.0
     assert np.all(policy.act(_trust_input(absent))[..., 0] == 1.0)
@@ -135,13 +142,24 @@ def test_critic_permutation_invariant_over_uavs():
     assert critic(obs[:, :2, :4], state(obs[:, :2, :4], filt[:, :2]), err[:, :2]).shape == (2, 2, 1)
 
 
-def test_flops_counted_once_with_flop_counter():
-    actor = ChannelActor()
+@pytest.mark.parametrize("context", [True, False])
+def test_flops_counted_once_with_flop_counter(context):
+    actor = ChannelActor(context=context)
     flops = count_flops_per_channel(actor)
-    matmul = 2 * (N_FEATURES * 128 + 128 * 64 + 64 * 1)
+    matmul = 2 * ((N_FEATURES + (2 if context else 0)) * 128 + 128 * 64 + 64 * 1)
     assert matmul <= flops < matmul + 1000
     assert MappoPolicy(actor).flops_per_channel == flops
     assert MappoPolicy(actor, isolation=False).flops_per_channel == 0.0
+
+
+def test_weights_round_trip_keeps_the_input_layout(tmp_path):
+    for context in (True, False):
+        actor = ChannelActor(context=context)
+        torch.save(actor.state_dict(), tmp_path / "w.pt")
+        loaded = load_actor(tmp_path / "w.pt")
+        assert bool(loaded.context) == context
+        x = torch.rand(2, 5, N_FEATURES)
+        torch.testing.assert_close(loaded(x), actor(x))
 
 
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="shipped weights not trained yet")
