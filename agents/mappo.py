@@ -66,7 +66,7 @@ class MappoConfig:
 
     tasks: tuple[str, ...] = DEFAULT_TASKS
     """training tasks (registered IDs, ``swarmloc/`` prefix optional); one collector each, cycled per batch"""
-    frames: int = 2_000_000
+    frames: int = 1_000_000
     """total environment frames (one frame = one env step of one episode, all its UAVs and channels)"""
     seed: int = 1
     """run seed: torch's generator and the training episode seeds derive from it (must be < 1_000_000)"""
@@ -104,8 +104,9 @@ class MappoConfig:
     """critic embedding width"""
     privileged_critic: bool = True
     """the critic also sees each UAV's true position error (training only; the actor never does)"""
-    init_trust: float = 0.7
-    """trust the untrained actor outputs"""
+    init_trust: float = 0.5
+    """trust the untrained actor outputs (0.5: the logit's middle, where no side of the jitter-driven pull
+    towards saturation at 0 or 1 is favoured before the accuracy term decides)"""
     init_log_std: float = 0.7
     """initial log σ of the Gaussian on the trust logit: σ = 2 spans α ≈ 0.04 … 0.99, because
     isolation only pays off near α → 0 (R = R0/α), far from the initial trust"""
