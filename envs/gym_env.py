@@ -16,6 +16,7 @@ from gymnasium import spaces
 
 from .cost import ProcessorProfile
 from .observation import N_FEATURES
+from .render import FirstEpisodeView
 from .reward import RewardWeights
 from .trust_env import (
     ActionChecker,
@@ -69,7 +70,7 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         self.action_space = spaces.Box(0.0, 1.0, (n, n_l), np.float32)
         self._check = ActionChecker((n, n_l), "(N, L)")
         self._started = False
-        self._renderer = None
+        self._view = FirstEpisodeView(self._batch, self.task_spec.task_id, human=self.render_mode == "human")
 
     # ------------------------------------------------------------------ properties
     @property
@@ -133,19 +134,9 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
             return None
-        if self._renderer is None:
-            from .render import TopDownRenderer
-
-            w = self._batch.core.world
-            self._renderer = TopDownRenderer(self._batch.layout, w.anchors, w.landmarks, self.task_spec.task_id,
-                                             human=self.render_mode == "human")
-        o = self._batch.core._out
-        frame = self._renderer.draw(o.truth[0], o.estimate[0], o.applied[0], o.valid[0],
-                                    float(o.steps[0]) * self.task_spec.dt)
+        frame = self._view.frame()
         return frame if self.render_mode == "rgb_array" else None
 
     def close(self) -> None:
         """Release the renderer; calling it again is harmless."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._view.close()

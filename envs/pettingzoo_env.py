@@ -18,6 +18,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from .cost import ProcessorProfile
 from .observation import N_FEATURES
+from .render import FirstEpisodeView
 from .reward import RewardWeights
 from .trust_env import (
     ActionChecker,
@@ -72,7 +73,7 @@ class SwarmLocParallelEnv(ParallelEnv):
         self._trust = np.empty((1, n, n_l))
         self._np_random: np.random.Generator | None = None
         self._obs: np.ndarray | None = None
-        self._renderer = None
+        self._view = FirstEpisodeView(self._batch, self.task_spec.task_id, human=self.render_mode == "human")
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Box:
@@ -155,22 +156,12 @@ class SwarmLocParallelEnv(ParallelEnv):
         """``rgb_array``: a ``(480, 480, 3)`` uint8 top-down frame; ``human``: draw it in a window."""
         if self.render_mode is None:
             return None
-        if self._renderer is None:
-            from .render import TopDownRenderer
-
-            w = self._batch.core.world
-            self._renderer = TopDownRenderer(self._batch.layout, w.anchors, w.landmarks, self.task_spec.task_id,
-                                             human=self.render_mode == "human")
-        o = self._batch.core._out
-        frame = self._renderer.draw(o.truth[0], o.estimate[0], o.applied[0], o.valid[0],
-                                    float(o.steps[0]) * self.task_spec.dt)
+        frame = self._view.frame()
         return frame if self.render_mode == "rgb_array" else None
 
     def close(self) -> None:
         """Release the renderer (idempotent)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._view.close()
 
 
 def parallel_env(task_id: str, **kwargs: Any) -> SwarmLocParallelEnv:

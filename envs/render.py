@@ -116,3 +116,38 @@ class TopDownRenderer:
 
             plt.close(self.fig)
         self.fig = None
+
+
+class FirstEpisodeView:
+    """Top-down view of a batch's first episode, created on first use.
+
+    Shared by the Gymnasium and PettingZoo envs: both show episode 0 of their
+    ``TrustEnvBatch``. ``frame()`` draws the latest update; ``close()`` is idempotent.
+
+    Args:
+        batch: the env's ``TrustEnvBatch``.
+        task_id: title of the view.
+        human: draw in a window (where a display exists) instead of offscreen only.
+    """
+
+    def __init__(self, batch, task_id: str, human: bool):
+        self._batch = batch
+        self._task_id = task_id
+        self._human = human
+        self._renderer: TopDownRenderer | None = None
+
+    def frame(self) -> np.ndarray:
+        """The ``(480, 480, 3)`` uint8 frame of episode 0 at its latest update."""
+        if self._renderer is None:
+            w = self._batch.core.world
+            self._renderer = TopDownRenderer(self._batch.layout, w.anchors, w.landmarks, self._task_id,
+                                             human=self._human)
+        o = self._batch.core._out
+        return self._renderer.draw(o.truth[0], o.estimate[0], o.applied[0], o.valid[0],
+                                   float(o.steps[0]) * self._batch.spec.dt)
+
+    def close(self) -> None:
+        """Release the renderer (harmless when called again)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

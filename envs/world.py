@@ -39,6 +39,26 @@ def validate_seeds(seeds: np.ndarray | list[int]) -> np.ndarray:
     return arr.astype(np.int64)
 
 
+def reset_indices(seeds: np.ndarray | list[int], mask: np.ndarray | None,
+                  batch_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a (partial) reset request; returns the seeds and the episode indices to reset.
+
+    Args:
+        seeds: ``(B,)`` episode seeds.
+        mask: optional ``(B,)`` bool of the episodes to reset (None: all).
+        batch_size: B.
+    """
+    seeds = validate_seeds(seeds)
+    if seeds.shape[0] != batch_size:
+        raise ValueError(f"expected {batch_size} seeds, got {seeds.shape[0]}")
+    if mask is None:
+        return seeds, np.arange(batch_size)
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape != (batch_size,):
+        raise ValueError(f"mask must have shape ({batch_size},), got {mask.shape}")
+    return seeds, np.nonzero(mask)[0]
+
+
 @dataclass
 class SenseBuffers:
     """Step buffers the world fills (views are reused between steps).
@@ -313,16 +333,7 @@ class World:
         The truth buffers hold step 0 of the reset episodes; their prior mean is the truth
         perturbed by the task's stated initial uncertainty (``spec.filter.init_*_sigma``).
         """
-        seeds = validate_seeds(seeds)
-        if seeds.shape[0] != self.batch_size:
-            raise ValueError(f"expected {self.batch_size} seeds, got {seeds.shape[0]}")
-        if mask is None:
-            idx = np.arange(self.batch_size)
-        else:
-            mask = np.asarray(mask, dtype=bool)
-            if mask.shape != (self.batch_size,):
-                raise ValueError(f"mask must have shape ({self.batch_size},), got {mask.shape}")
-            idx = np.nonzero(mask)[0]
+        seeds, idx = reset_indices(seeds, mask, self.batch_size)
         if idx.size == 0:
             return self.x0
         self.seeds[idx] = seeds[idx]

@@ -31,7 +31,7 @@ import numpy as np
 from ..channels import ChannelLayout, build_layout
 from ..rng import Stream, normal
 from ..specs import RecordedFlight, TaskSpec
-from ..world import SenseBuffers, validate_seeds
+from ..world import SenseBuffers, reset_indices
 from .util_flight import Recording, load_recording
 from .util_import import find_util_data
 
@@ -103,16 +103,7 @@ class RecordedWorld:
                 only changes the initial-prior perturbation.
             mask: optional ``(B,)`` bool: reset only these episodes; the others keep running.
         """
-        seeds = validate_seeds(seeds)
-        if seeds.shape[0] != self.batch_size:
-            raise ValueError(f"expected {self.batch_size} seeds, got {seeds.shape[0]}")
-        if mask is None:
-            idx = np.arange(self.batch_size)
-        else:
-            mask = np.asarray(mask, dtype=bool)
-            if mask.shape != (self.batch_size,):
-                raise ValueError(f"mask must have shape ({self.batch_size},), got {mask.shape}")
-            idx = np.nonzero(mask)[0]
+        seeds, idx = reset_indices(seeds, mask, self.batch_size)
         if idx.size == 0:
             return self.x0
         self.seeds[idx] = seeds[idx]
