@@ -251,6 +251,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    own_writer = writer is None
     writer = writer or SummaryWriter(str(run_dir))
     writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
@@ -394,6 +395,8 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     for c in collectors:
         c.shutdown()
     writer.flush()
+    if own_writer:
+        writer.close()
     seeds = [s for sd in seeders for s in sd.drawn]
     return TrainResult(actor_state={k: v.detach().clone() for k, v in actor_net.state_dict().items()},
                        frames=frames, wall_time_s=time.time() - start, iterations=n_iters, episode_seeds=seeds,

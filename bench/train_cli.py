@@ -54,14 +54,22 @@ def command_line() -> str:
     return " ".join([prog, *(shlex.quote(a) for a in sys.argv[1:])])
 
 
+#: the code a MAPPO training run depends on (its provenance is "dirty" if any of it changed)
+TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_nets.py", "agents/mappo_policy.py", "agents/smoothing.py",
+                 "bench/train_cli.py")
+
+
 def git_commit(cwd: Path | None = None) -> str:
-    """``git rev-parse HEAD`` (with ``-dirty`` when tracked files changed), or ``unknown``."""
+    """``git rev-parse HEAD``, with ``-dirty`` when the training code (``TRAINING_CODE``) differs from it.
+
+    Returns ``unknown`` outside a git checkout.
+    """
     cwd = cwd or Path(__file__).resolve().parent.parent
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
                               check=True, timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *TRAINING_CODE],
+                               cwd=cwd, capture_output=True, text=True, timeout=10).stdout.strip()
         return head + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
