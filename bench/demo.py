@@ -41,6 +41,7 @@ class SummaryRow:
     weight_var: float | None
     detection: float | None
     diverged: float | None
+    cpu_s: float | None = None
 
 
 def _mean(results: Results, metric: str) -> float | None:
@@ -49,8 +50,8 @@ def _mean(results: Results, metric: str) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def summarize_results(results: Results) -> SummaryRow:
-    """The summary line of one results file."""
+def summarize_results(results: Results, cpu_s: float | None = None) -> SummaryRow:
+    """The summary line of one results file (``cpu_s``: the method's CPU time, if measured)."""
     score = aggregate_across_tasks(results.episodes, "normalized_score")
     energy = _mean(results, "energy_j")
     return SummaryRow(
@@ -60,7 +61,7 @@ def summarize_results(results: Results) -> SummaryRow:
         delay_ms=_mean(results, "delay_ms"),
         energy_mj=None if energy is None else 1e3 * energy, jitter=_mean(results, "jitter"),
         weight_var=_mean(results, "weight_var"), detection=_mean(results, "anomaly_detection_rate"),
-        diverged=_mean(results, "diverged"),
+        diverged=_mean(results, "diverged"), cpu_s=cpu_s,
     )
 
 
@@ -99,7 +100,7 @@ def rmse_rows(all_results: dict[str, Results]) -> tuple[list[str], list[list[str
 
 
 SUMMARY_HEADER = ["method", "track", "tasks", "score", "IQM", "95% CI", "ms/step", "mJ/UAV", "jitter", "α var",
-                  "detect", "diverged"]
+                  "detect", "diverged", "CPU [s]"]
 
 
 def summary_cells(row: SummaryRow) -> list[str]:
@@ -109,17 +110,21 @@ def summary_cells(row: SummaryRow) -> list[str]:
             _fmt(s[0]) if s else "—", _fmt(s[1]) if s else "—",
             f"[{_fmt(s[2], 2)}, {_fmt(s[3], 2)}]" if s else "—", _fmt(row.delay_ms, 4),
             _fmt(row.energy_mj), _fmt(row.jitter), _fmt(row.weight_var), _fmt(row.detection),
-            "—" if row.diverged is None else f"{100 * row.diverged:.0f}%"]
+            "—" if row.diverged is None else f"{100 * row.diverged:.0f}%",
+            "—" if row.cpu_s is None else f"{row.cpu_s:.1f}"]
 
 
-def _ranked(all_results: dict[str, Results]) -> tuple[list[SummaryRow], list[SummaryRow]]:
+def _ranked(all_results: dict[str, Results],
+            cpu: dict[str, float] | None = None) -> tuple[list[SummaryRow], list[SummaryRow]]:
     """Summary rows: public methods by mean normalized score (best first), then privileged ones."""
-    rows = [summarize_results(r) for r in _ordered(all_results)]
+    cpu = cpu or {}
+    rows = [summarize_results(r, cpu.get(r.method.name)) for r in _ordered(all_results)]
     public = sorted([r for r in rows if not r.privileged], key=lambda r: -(r.score[0] if r.score else -np.inf))
     return public, [r for r in rows if r.privileged]
 
 
-def print_tables(all_results: dict[str, Results], console: Console, suite: Suite) -> None:
+def print_tables(all_results: dict[str, Results], console: Console, suite: Suite,
+                 cpu: dict[str, float] | None = None) -> None:
     """Print the mean-RMSE table (methods × tasks, split to fit the width) and the summary."""
     header, rows = rmse_rows(all_results)
     n_seeds = len(suite.seeds(suite.tasks[0]))
@@ -141,11 +146,12 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
             table.add_row(cells[0], *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
         console.print(table)
     t2 = Table(title="summary over all episodes — normalized score: 0 = uniform CEKF, 1 = privileged oracle "
-                     "(mean, IQM, stratified bootstrap 95% CI; tasks without labelled faults have none)",
+                     "(mean, IQM, stratified bootstrap 95% CI; tasks without labelled faults have none); "
+                     "CPU [s]: the method's evaluation time here",
                title_style="bold")
     for j, name in enumerate(SUMMARY_HEADER):
         t2.add_column(name, justify="left" if j < 2 else "right", no_wrap=j in (0, 5))
-    public, privileged = _ranked(all_results)
+    public, privileged = _ranked(all_results, cpu)
     for r in public:
         t2.add_row(*summary_cells(r))
     if privileged:
@@ -155,16 +161,17 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
     console.print(t2)
 
 
-def markdown_tables(all_results: dict[str, Results], suite: Suite) -> str:
+def markdown_tables(all_results: dict[str, Results], suite: Suite, cpu: dict[str, float] | None = None) -> str:
     """The two tables as Markdown (for ``summary.md`` and the README)."""
     header, rows = rmse_rows(all_results)
     lines = [f"Mean RMSE [m] per task (suite `{suite.name}`, {len(suite.seeds(suite.tasks[0]))} seeds per task; "
              "† privileged, not ranked; — not run):", "",
              "| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
     lines += ["| " + " | ".join(cells) + " |" for cells in rows]
-    public, privileged = _ranked(all_results)
+    public, privileged = _ranked(all_results, cpu)
     lines += ["", "Summary over all episodes (normalized score: 0 = uniform CEKF, 1 = privileged oracle; mean, IQM, "
-              "stratified bootstrap 95% CI):", "",
+              "stratified bootstrap 95% CI; ms/step and mJ/UAV on the reference processor; CPU [s]: the method's own "
+              "evaluation time here, all tasks):", "",
               "| " + " | ".join(SUMMARY_HEADER) + " |",
               "|" + "|".join(["---", "---"] + ["---:"] * (len(SUMMARY_HEADER) - 2)) + "|"]
     lines += ["| " + " | ".join(summary_cells(r)) + " |" for r in public + privileged]
@@ -213,6 +220,7 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
                   f"{len(suite.seeds(suite.tasks[0]))} seeds (suite {suite.name}), {workers} worker(s)")
     runs = evaluate_methods(methods, suite, workers=workers, trace=plots)
     all_results: dict[str, Results] = {}
+    cpu: dict[str, float] = {}
     paths = []
     for name, run in runs.items():
         if run.unsupported:
@@ -226,10 +234,12 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
         if run.traces:
             write_traces(traces_path(path), run.traces)
         all_results[name] = results
-        paths.append(path)
+        cpu[run.loaded.name] = run.cpu_seconds
+        if run.traces:
+            paths.append(path)
     evaluated = time.perf_counter() - started
-    print_tables(all_results, console, suite)
-    (out / "summary.md").write_text(markdown_tables(all_results, suite), encoding="utf-8")
+    print_tables(all_results, console, suite, cpu)
+    (out / "summary.md").write_text(markdown_tables(all_results, suite, cpu), encoding="utf-8")
     if plots:
         written = plot_results(paths, out / "plots", workers=workers)
         console.print(f"wrote {len(written)} plots to {out / 'plots'}")

@@ -60,8 +60,9 @@ def load_traces(results_path: str | os.PathLike[str]) -> list[Trace]:
     if sidecar.is_file():
         return read_traces(sidecar)
     first: dict[str, int] = {}
-    for task, seed in results.episode_keys():
-        first.setdefault(task, seed)
+    for episode in results.episodes:
+        if episode.metrics.rmse is not None:  # tasks the method could not run have no trace
+            first.setdefault(episode.task, episode.seed)
     traces = []
     for task, seed in first.items():
         _, trace = rollout(load_method(results.method.entry_point), get_spec(task), [seed], trace=True)

@@ -24,6 +24,7 @@ import hashlib
 import multiprocessing
 import os
 import tempfile
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -456,6 +457,7 @@ class TaskOutcome:
         episodes: method → one metrics dict per seed.
         traces: method → trace of the first seed (when requested).
         unsupported: method → why it cannot run this task (its metrics are all null).
+        cpu_seconds: method → CPU time of its rollout (references excluded).
     """
 
     task: str
@@ -463,6 +465,7 @@ class TaskOutcome:
     episodes: dict[str, list[dict[str, float | None]]] = field(default_factory=dict)
     traces: dict[str, Trace] = field(default_factory=dict)
     unsupported: dict[str, str] = field(default_factory=dict)
+    cpu_seconds: dict[str, float] = field(default_factory=dict)
 
 
 def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[int], *,
@@ -485,12 +488,15 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
     weights = weights or {}
     for text in methods:
         loaded = load_method(text, weights.get(text))
+        started = time.process_time()
         try:
             metrics, tr = rollout(loaded, spec, seeds, trace=trace)
         except UnsupportedTask as err:
             outcome.unsupported[text] = str(err)
             outcome.episodes[text] = [{name: None for name in METRIC_NAMES} for _ in seeds]
             continue
+        finally:
+            outcome.cpu_seconds[text] = time.process_time() - started
         outcome.episodes[text] = metrics
         if tr is not None:
             outcome.traces[text] = tr
@@ -565,6 +571,7 @@ class MethodRun:
         traces: first-seed traces per task.
         weights: the weights file, if any.
         unsupported: task → why the method cannot run it (null metrics there).
+        cpu_seconds: CPU time of its rollouts over the suite.
     """
 
     loaded: LoadedMethod
@@ -572,6 +579,7 @@ class MethodRun:
     traces: list[Trace]
     weights: str | None = None
     unsupported: dict[str, str] = field(default_factory=dict)
+    cpu_seconds: float = 0.0
 
     def results(self, suite: Suite) -> Results:
         """Assemble the results file (aggregates, provenance) of this run."""
@@ -655,7 +663,8 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
                 traces.append(out.traces[m])
         unsupported = {t: outcomes[t].unsupported[m] for t in suite.tasks if m in outcomes[t].unsupported}
         runs[m] = MethodRun(loaded=loaded[m], episodes=episodes, traces=traces, weights=weights.get(m),
-                            unsupported=unsupported)
+                            unsupported=unsupported,
+                            cpu_seconds=sum(outcomes[t].cpu_seconds.get(m, 0.0) for t in suite.tasks))
     return runs
 
 
