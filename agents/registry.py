@@ -97,6 +97,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "MAPPO, raw α without smoothing (madrl Exp. 6)"),
     MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A", False, True,
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
+    MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A", False, True,
+                "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True, "privileged: α_min on labelled faults (score 1)"),
 )}
 

@@ -61,7 +61,7 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 
 _SHIPPED_TRACK_A: tuple[str, ...] = (
     "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "random", "oracle",
-    "mappo", "mappo-no-smoothing", "mappo-no-isolation",
+    "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only",
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (
     "dead-reckoning", "imm-kf", "imm-ekf", "imm-arkf", "federated", "federated-fdi", "ci-ekf", "ci-ekf-no-aa",

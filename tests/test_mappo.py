@@ -174,7 +174,10 @@ def test_shipped_weights_load_and_give_trust_in_unit_interval():
     state = torch.load(SHIPPED, weights_only=True)
     assert all(isinstance(v, torch.Tensor) for v in state.values())  # a plain state_dict
     assert SHIPPED.stat().st_size < 200_000
-    for name in ("mappo", "mappo-no-smoothing", "mappo-no-isolation"):
+    names = ["mappo", "mappo-no-smoothing", "mappo-no-isolation"]
+    if (WEIGHTS_DIR / "mappo_accuracy_only.pt").is_file():
+        names.append("mappo-accuracy-only")
+    for name in names:
         assert get_entry(name).track == "A"
         loaded = load_method(name)
         rng = np.random.default_rng(0)
