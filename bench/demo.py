@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from swarmloc.bench.plots import plot_results, short_name
@@ -135,29 +136,29 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
     chunks = [task_cols[i:i + per_table] for i in range(0, len(task_cols), per_table)]
     for c, cols in enumerate(chunks):
         part = f" ({c + 1}/{len(chunks)})" if len(chunks) > 1 else ""
-        table = Table(title=f"mean RMSE [m] — suite {suite.name}, {n_seeds} seeds per task{part}; "
-                            "† privileged (reads fault labels), not ranked; — not run", title_style="bold")
+        table = Table(title=escape(f"mean RMSE [m] — suite {suite.name}, {n_seeds} seeds per task{part}; "
+                            "† privileged (reads fault labels), not ranked; — not run"), title_style="bold")
         table.add_column("method", no_wrap=True)
         for j in cols:
-            table.add_column(header[j], justify="right", max_width=8, overflow="fold")
+            table.add_column(escape(header[j]), justify="right", max_width=8, overflow="fold")
         for i, cells in enumerate(rows):
             if i == n_public:
                 table.add_section()
-            table.add_row(cells[0], *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
+            table.add_row(escape(cells[0]), *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
         console.print(table)
-    t2 = Table(title="summary over all episodes — normalized score: 0 = uniform CEKF, 1 = privileged oracle "
+    t2 = Table(title=escape("summary over all episodes — normalized score: 0 = uniform CEKF, 1 = privileged oracle "
                      "(mean, IQM, stratified bootstrap 95% CI; tasks without labelled faults have none); "
-                     "CPU [s]: the method's evaluation time here",
+                     "CPU [s]: the method's evaluation time here"),
                title_style="bold")
     for j, name in enumerate(SUMMARY_HEADER):
-        t2.add_column(name, justify="left" if j < 2 else "right", no_wrap=j in (0, 5))
+        t2.add_column(escape(name), justify="left" if j < 2 else "right", no_wrap=j in (0, 5))
     public, privileged = _ranked(all_results, cpu)
     for r in public:
-        t2.add_row(*summary_cells(r))
+        t2.add_row(*map(escape, summary_cells(r)))
     if privileged:
         t2.add_section()
         for r in privileged:
-            t2.add_row(*summary_cells(r), style="dim italic")
+            t2.add_row(*map(escape, summary_cells(r)), style="dim italic")
     console.print(t2)
 
 
@@ -226,8 +227,8 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
         if run.unsupported:
             tasks = ", ".join(short_name(t) for t in run.unsupported)
             first = next(iter(run.unsupported.values()))
-            console.print(f"[yellow]{run.loaded.name} not run on {len(run.unsupported)} task(s)[/yellow] ({tasks}): "
-                          f"{first}")
+            console.print(f"[yellow]{escape(run.loaded.name)} not run on {len(run.unsupported)} task(s)[/yellow] "
+                          f"({escape(tasks)}): {escape(first)}")
         results = run.results(suite)
         path = out / "results" / f"{run.loaded.name}.json"
         write_results(path, results)

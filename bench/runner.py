@@ -23,7 +23,6 @@ import contextlib
 import hashlib
 import multiprocessing
 import os
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -44,17 +43,18 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench import metrics as M
-from swarmloc.bench.alignment import align_estimates
+from swarmloc.bench.recorder import EpisodeRecorder
 from swarmloc.bench.results import METRIC_NAMES, MethodInfo, Results, SuiteInfo, make_results, write_results
 from swarmloc.bench.suites import Suite, require_data
+from swarmloc.bench.traces import Trace, read_traces, traces_path, write_traces
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.observation import build_observation, kind_one_hot
-from swarmloc.envs.reward import standard_reward
 from swarmloc.envs.specs import TaskSpec
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World, validate_seeds
 
 MAX_WORKERS = 64
+_Recorder = EpisodeRecorder  # former private name, kept for existing imports
 
 
 def make_world(spec: TaskSpec, batch_size: int) -> Any:
@@ -64,232 +64,6 @@ def make_world(spec: TaskSpec, batch_size: int) -> Any:
     except ImportError:  # an envs without recorded worlds: every world is simulated
         return World(spec, batch_size)
     return _make_world(spec, batch_size)
-
-
-# --------------------------------------------------------------------------- traces
-
-
-@dataclass
-class Trace:
-    """Per-step record of one episode, for plots (the first seed of each task).
-
-    Attributes:
-        method, task, seed: what ran.
-        times: ``(T,)`` update times [s].
-        estimate, truth: ``(T, N, 3)`` positions [m].
-        applied: ``(T, N, L)`` applied trust, or None (estimator without weights).
-        valid, label: ``(T, N, L)`` bool.
-        kind: ``(N, L)`` channel kinds.
-        scored: ``(N,)`` bool, scored UAVs.
-        fault_window: ``(2,)`` the task's fault window (NaN if none).
-    """
-
-    method: str
-    task: str
-    seed: int
-    times: np.ndarray
-    estimate: np.ndarray
-    truth: np.ndarray
-    applied: np.ndarray | None
-    valid: np.ndarray
-    label: np.ndarray
-    kind: np.ndarray
-    scored: np.ndarray
-    fault_window: np.ndarray
-
-    _ARRAYS = ("times", "estimate", "truth", "applied", "valid", "label", "kind", "scored", "fault_window")
-
-    @property
-    def errors(self) -> np.ndarray:
-        """``(T, N)`` position errors [m]."""
-        return M.position_errors(self.estimate, self.truth)
-
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """Flat ``{"<task>|<field>": array}`` for ``np.savez``."""
-        out = {f"{self.task}|{name}": getattr(self, name) for name in self._ARRAYS if getattr(self, name) is not None}
-        out[f"{self.task}|meta"] = np.array([self.method, str(self.seed)])
-        return out
-
-    @classmethod
-    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> list["Trace"]:
-        """Inverse of :meth:`to_arrays` over every task in ``arrays``."""
-        tasks = sorted({key.split("|", 1)[0] for key in arrays})
-        traces = []
-        for task in tasks:
-            meta = arrays[f"{task}|meta"]
-            fields = {name: arrays.get(f"{task}|{name}") for name in cls._ARRAYS}
-            traces.append(cls(method=str(meta[0]), task=task, seed=int(meta[1]), **fields))
-        return traces
-
-
-def traces_path(results_path: str | os.PathLike[str]) -> Path:
-    """Where the traces of a results file live: ``<results stem>.traces.npz`` beside it."""
-    path = Path(results_path)
-    return path.with_name(f"{path.stem}.traces.npz")
-
-
-def write_traces(path: str | os.PathLike[str], traces: Sequence[Trace]) -> Path:
-    """Write traces atomically (temporary file + ``os.replace``)."""
-    target = Path(path)
-    arrays: dict[str, np.ndarray] = {}
-    for tr in traces:
-        arrays.update(tr.to_arrays())
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        umask = os.umask(0)  # mkstemp creates 0600; use what a plain open() would
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as handle:
-            np.savez_compressed(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return target
-
-
-def read_traces(path: str | os.PathLike[str]) -> list[Trace]:
-    """Read traces written by :func:`write_traces`."""
-    with np.load(path, allow_pickle=False) as data:
-        return Trace.from_arrays({key: data[key] for key in data.files})
-
-
-# --------------------------------------------------------------------------- per-episode recording
-
-
-class _Recorder:
-    """Collects what the metrics need while B episodes of one task run.
-
-    Args:
-        spec: the task; seeds: ``(B,)``; schedule: the world's fault schedule (None for a
-            world without one, e.g. a recorded flight).
-        with_trust: the method exposes the trust it applied.
-        with_flops: the method reports FLOPs.
-        trace: keep a per-step record of episode 0.
-    """
-
-    def __init__(self, spec: TaskSpec, seeds: np.ndarray, schedule: Any, n_channels: int,
-                 with_trust: bool, with_flops: bool, trace: bool) -> None:
-        n_t, n_b, n = spec.n_steps, len(seeds), spec.n_uav
-        self.spec, self.seeds, self.schedule = spec, seeds, schedule
-        self.times = spec.dt * np.arange(1, n_t + 1)
-        self.scored_steps = self.times >= spec.scoring.start - 1e-9
-        self.nodes = np.zeros(n, dtype=bool)
-        self.nodes[list(spec.scored_nodes)] = True
-        self.errors = np.zeros((n_t, n_b, n))
-        # anchor-free tasks are scored after a yaw + translation alignment (bench/alignment.py),
-        # which needs the whole episode: keep the positions and align once at the end
-        self.align = spec.scoring.align_first_seconds > 0
-        self._positions = (np.zeros((n_t, n_b, n, 3)), np.zeros((n_t, n_b, n, 3))) if self.align else None
-        self.team = np.zeros((n_t, n_b))
-        self.delay_ms = np.zeros(n_b)
-        self.energy_j = np.zeros(n_b)
-        self.label_steps = np.zeros((n_t, n_b), dtype=bool)
-        self.with_trust, self.with_flops = with_trust, with_flops
-        self.stats = M.ChannelStats(n_b, self.nodes) if with_trust else None
-        self.trace = None
-        if trace:
-            self.trace = {"estimate": np.zeros((n_t, n, 3)), "truth": np.zeros((n_t, n, 3)),
-                          "applied": np.ones((n_t, n, n_channels), dtype=np.float32) if with_trust else None,
-                          "valid": np.zeros((n_t, n, n_channels), dtype=bool),
-                          "label": np.zeros((n_t, n, n_channels), dtype=bool)}
-
-    def record(self, k: int, estimate: np.ndarray, truth: np.ndarray, valid: np.ndarray, label: np.ndarray,
-               applied: np.ndarray | None, previous: np.ndarray | None, flops: np.ndarray | None) -> None:
-        """Record update k (0-based) of every episode (``(B, N, ...)`` arrays)."""
-        s = self.spec
-        self.errors[k] = M.position_errors(estimate, truth)
-        if self._positions is not None:
-            self._positions[0][k], self._positions[1][k] = estimate, truth
-        self.label_steps[k] = label[:, self.nodes].any(axis=(1, 2))
-        # the reward counts every valid channel as used when the method exposes no trust
-        a = applied if applied is not None else np.ones(valid.shape)
-        p = previous if previous is not None else a
-        terms = standard_reward(estimate, truth, a, p, valid, s.filter.alpha_th,
-                                flops if flops is not None else np.zeros(estimate.shape[:2]))
-        self.team[k] = terms.reward.mean(axis=1)
-        if self.scored_steps[k]:
-            if flops is not None:
-                self.delay_ms += terms.delay_ms[:, self.nodes].mean(axis=1)
-                self.energy_j += terms.energy_j[:, self.nodes].mean(axis=1)
-            if self.stats is not None and applied is not None and previous is not None:
-                self.stats.add(applied, previous, valid, label)
-        if self.trace is not None:
-            tr = self.trace
-            tr["estimate"][k], tr["truth"][k] = estimate[0], truth[0]
-            tr["valid"][k], tr["label"][k] = valid[0], label[0]
-            if tr["applied"] is not None and applied is not None:
-                tr["applied"][k] = applied[0]
-
-    def _healthy(self, b: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Healthy UAVs and the steps they are scored on, or None where undefined."""
-        s, steps_ok = self.spec, self.scored_steps
-        sched = self.schedule
-        if s.scoring.healthy_nodes:
-            healthy = np.zeros(s.n_uav, dtype=bool)
-            healthy[list(s.scoring.healthy_nodes)] = True
-            if s.scoring.fault_window is not None:
-                return healthy, M.window_steps(self.times, s.scoring.fault_window) & steps_ok
-            span = sched.imu_fault_span()[b] if sched is not None else np.full(2, np.nan)
-            window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
-            return healthy, (M.window_steps(self.times, window) if window else steps_ok) & steps_ok
-        if s.faults.imu_cascade_random is not None and sched is not None:
-            healthy = ~sched.faulty_nodes[b]
-            span = sched.imu_fault_span()[b]
-            return healthy, M.window_steps(self.times, (float(span[0]), float(span[1]))) & steps_ok
-        return None
-
-    def _apply_alignment(self) -> None:
-        """Replace the errors by those after the task's scoring alignment (once, at the end)."""
-        if self._positions is not None:
-            estimate, truth = self._positions
-            self.errors = M.position_errors(align_estimates(self.spec, self.times, estimate, truth), truth)
-            self._positions = None
-
-    def episode_metrics(self, b: int) -> dict[str, float | None]:
-        """Every metric of episode b except ``normalized_score`` (None here)."""
-        self._apply_alignment()
-        s = self.spec
-        steps = self.scored_steps
-        e = self.errors[steps][:, b][:, self.nodes]
-        if s.scoring.fault_window is not None:
-            fault_steps = M.window_steps(self.times, s.scoring.fault_window)[steps]
-        else:
-            fault_steps = self.label_steps[steps, b]
-        healthy = self._healthy(b)
-        n_scored = max(int(steps.sum()), 1)
-        out: dict[str, float | None] = {
-            "rmse": M.rmse(e),
-            "mean_error": M.mean_error(e),
-            "median_error": M.median_error(e),
-            "max_error": M.max_error(e),
-            "cep90": M.cep90(e),
-            "fault_rmse": M.fault_rmse(e, fault_steps),
-            "healthy_rmse": None if healthy is None else M.healthy_rmse(self.errors[:, b], *healthy),
-            "diverged": M.diverged(e),
-            "delay_ms": float(self.delay_ms[b] / n_scored) if self.with_flops else None,
-            "energy_j": float(self.energy_j[b]) if self.with_flops else None,
-            "jitter": self.stats.jitter(b) if self.stats is not None else None,
-            "weight_var": self.stats.weight_var(b) if self.stats is not None else None,
-            "anomaly_detection_rate": self.stats.anomaly_detection_rate(b) if self.stats is not None else None,
-            "team_return": M.team_return(self.team[:, b]),
-            "normalized_score": None,
-        }
-        return out
-
-    def make_trace(self, method: str, layout_kind: np.ndarray) -> Trace | None:
-        """The trace of episode 0 (None if not kept)."""
-        if self.trace is None:
-            return None
-        window = self.spec.scoring.fault_window
-        if window is None and self.spec.faults.imu_cascade_random is not None and self.schedule is not None:
-            window = tuple(self.schedule.imu_fault_span()[0])
-        return Trace(method=method, task=self.spec.task_id, seed=int(self.seeds[0]), times=self.times.copy(),
-                     kind=np.asarray(layout_kind), scored=self.nodes.copy(),
-                     fault_window=np.array(window if window is not None else (np.nan, np.nan), dtype=float),
-                     **self.trace)
 
 
 # --------------------------------------------------------------------------- rollouts
@@ -311,7 +85,7 @@ def _reset_or_unsupported(loaded: LoadedMethod, spec: TaskSpec, reset: Callable[
         raise UnsupportedTask(f"{loaded.name} cannot run {spec.task_id}: {err}") from err
 
 
-def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, trace: bool) -> tuple[_Recorder, Any]:
+def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, trace: bool) -> tuple[EpisodeRecorder, Any]:
     """Run a Track A policy on B episodes through ``LinkTrustCore``."""
     policy = loaded.method
     n_b = len(seeds)
@@ -322,7 +96,7 @@ def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, tra
     one_hot = kind_one_hot(layout.kind)
     obs = None
     fpc = float(getattr(policy, "flops_per_channel", 0.0))
-    rec = _Recorder(spec, seeds, getattr(core.world, "schedule", None), layout.n_channels, True, True, trace)
+    rec = EpisodeRecorder(spec, seeds, getattr(core.world, "schedule", None), layout.n_channels, True, True, trace)
     for k in range(spec.n_steps):
         obs = build_observation(cs, one_hot, out=obs)
         inp = TrustInput.view(obs, cs.resid, cs.pred, cs.nis, cs.applied, cs.jerk, cs.valid,
@@ -358,7 +132,7 @@ def _check_output(out: Any, name: str, shape: tuple[int, int, int]) -> Estimator
 
 
 def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
-                       trace: bool) -> tuple[_Recorder, Any]:
+                       trace: bool) -> tuple[EpisodeRecorder, Any]:
     """Run a Track B estimator on B episodes through ``World``."""
     est = loaded.method
     n_b = len(seeds)
@@ -367,7 +141,7 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
     facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds), anchors=world.anchors)
     _reset_or_unsupported(loaded, spec, lambda: est.reset(facts, facts.x0))
     shape = (n_b, spec.n_uav, world.layout.n_channels)
-    rec: _Recorder | None = None
+    rec: EpisodeRecorder | None = None
     previous: np.ndarray | None = None
     for k in range(spec.n_steps):
         buf = world.sense()
@@ -377,7 +151,7 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
             est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy())))
         out = _check_output(est.step(meas), loaded.name, shape)
         if rec is None:
-            rec = _Recorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
+            rec = EpisodeRecorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
                             trace)
         weights = None if out.weights is None else np.clip(np.asarray(out.weights, dtype=np.float64), 0.0, 1.0)
         if weights is not None and previous is None:
@@ -552,13 +326,21 @@ def _worker_init() -> None:
 
 def _task_job(methods: list[str], task: str, seeds: list[int], weights: dict[str, str | None],
               trace: bool) -> TaskOutcome:
-    """Top-level (picklable) job: one task, every method."""
+    """Top-level (picklable) job: some methods on one task's seeds."""
     return evaluate_task(methods, task, seeds, weights=weights, trace=trace)
 
 
 def _task_cost(task: str, n_seeds: int) -> float:
     s = get_spec(task)
     return float(s.n_steps * s.n_uav * (s.n_channels + 4) * n_seeds)
+
+
+def _merge(into: TaskOutcome, part: TaskOutcome) -> None:
+    """Add a job's methods to the task's outcome."""
+    into.episodes.update(part.episodes)
+    into.traces.update(part.traces)
+    into.unsupported.update(part.unsupported)
+    into.cpu_seconds.update(part.cpu_seconds)
 
 
 @dataclass
@@ -604,7 +386,7 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
                      weights: Mapping[str, str | None] | None = None, trace: bool = True,
                      progress: bool = True,
                      on_task: Callable[[TaskOutcome], None] | None = None) -> dict[str, MethodRun]:
-    """Evaluate several methods on a suite, tasks in parallel.
+    """Evaluate several methods on a suite, (task, method) runs in parallel.
 
     Args:
         methods: method names or entry points.
@@ -613,7 +395,7 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
         weights: optional method → weights file.
         trace: keep first-seed traces for plots.
         progress: show a progress bar (tqdm, on stderr).
-        on_task: called with each finished task's outcome.
+        on_task: called with each task's outcome once all its methods are done.
 
     Returns:
         method → ``MethodRun``, episodes in suite order.
@@ -627,27 +409,32 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
     weights = {m: (str(w) if w is not None else None) for m, w in (weights or {}).items()}
     loaded = {m: load_method(m, weights.get(m)) for m in methods}  # fail fast, before any work
     require_data(suite)  # a recorded task whose data is not imported here: say so before any work
-    jobs = sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t))))
-    outcomes: dict[str, TaskOutcome] = {}
+    # one job per (task, method): the pool balances methods of very different cost; the
+    # references of the normalized score are cached per worker process
+    tasks = sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t))))
+    jobs = [(task, m) for task in tasks for m in methods] if workers > 1 else [(task, None) for task in tasks]
+    outcomes = {task: TaskOutcome(task=task, seeds=suite.seeds(task)) for task in suite.tasks}
+    pending = {task: len(methods) for task in suite.tasks}
     label = methods[0] if len(methods) == 1 else f"{len(methods)} methods"
-    bar = tqdm(total=len(jobs), desc=f"evaluating {label} on {suite.name}", unit="task", disable=not progress)
+    bar = tqdm(total=len(suite.tasks) * len(methods), desc=f"evaluating {label} on {suite.name}",
+               unit="run", disable=not progress)
 
-    def done(outcome: TaskOutcome) -> None:
-        outcomes[outcome.task] = outcome
-        bar.update(1)
-        bar.set_postfix_str(outcome.task.removeprefix("swarmloc/"))
-        if on_task is not None:
-            on_task(outcome)
+    def done(part: TaskOutcome) -> None:
+        _merge(outcomes[part.task], part)
+        pending[part.task] -= len(part.episodes)
+        bar.update(len(part.episodes))
+        bar.set_postfix_str(part.task.removeprefix("swarmloc/"))
+        if on_task is not None and pending[part.task] == 0:
+            on_task(outcomes[part.task])
 
     try:
         if workers == 1:
-            for task in jobs:
+            for task, _ in jobs:
                 done(_task_job(list(methods), task, suite.seeds(task), weights, trace))
         else:
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-                futures = [pool.submit(_task_job, list(methods), task, suite.seeds(task), weights, trace)
-                           for task in jobs]
+                futures = [pool.submit(_task_job, [m], task, suite.seeds(task), weights, trace) for task, m in jobs]
                 for future in as_completed(futures):
                     done(future.result())
     finally:
