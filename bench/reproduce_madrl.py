@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.agents.registry import LoadedMethod, load_method
+from swarmloc.bench import metrics as M
 from swarmloc.bench.runner import evaluate_task, rollout
 from swarmloc.bench.stats import bootstrap_ci
 from swarmloc.bench.suites import TEST_SEED_START
@@ -149,8 +150,7 @@ def _window_weights(traces: list) -> tuple[float, float]:
     """Mean α inside the fault window on attacked (labelled) and normal anchor channels."""
     attacked, normal = [], []
     for tr in traces:
-        t0, t1 = tr.fault_window
-        inside = (tr.times >= t0) & (tr.times <= t1)
+        inside = M.window_steps(tr.times, tuple(tr.fault_window))
         anchor = (tr.kind == ANCHOR)[None]
         sel = inside[:, None, None] & tr.valid & anchor
         attacked.append(tr.applied[sel & tr.label])
@@ -176,8 +176,9 @@ def exp4(runs: Runs, trace_seeds: list[int]) -> list[str]:
 
 
 def _healthy_errors(trace, before: bool) -> np.ndarray:
-    t0, t1 = trace.fault_window
-    steps = trace.times < t0 if before else (trace.times >= t0) & (trace.times <= t1)
+    # the runner's half-open window start ≤ t < end
+    inside = M.window_steps(trace.times, tuple(trace.fault_window))
+    steps = (trace.times < trace.fault_window[0]) & ~inside if before else inside
     healthy = list(get_spec(trace.task).scoring.healthy_nodes)
     return trace.errors[steps][:, healthy]
 
