@@ -11,8 +11,10 @@ wraps this class; none holds physics.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import cekf
@@ -22,6 +24,29 @@ from .worlds import AnyWorld, make_world
 
 #: private per-episode state of the simulated world that one ``sense`` changes (Gauss–Markov NLOS)
 _WORLD_PRIVATE_STATE = ("_gm_bias", "_gm_left")
+
+
+#: below this batch size the kernels run on the calling thread: a parallel region over a
+#: handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
+#: spin-wait for their turn can make one step take tens of milliseconds
+SERIAL_BELOW = 32
+
+
+def small_batch_serial(method):
+    """Run a core method with one numba thread when the core's batch is small."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        threads = numba.get_num_threads()
+        if self.batch_size >= SERIAL_BELOW or threads == 1:
+            return method(self, *args, **kwargs)
+        numba.set_num_threads(1)
+        try:
+            return method(self, *args, **kwargs)
+        finally:
+            numba.set_num_threads(threads)
+
+    return wrapper
 
 
 @dataclass
@@ -116,6 +141,7 @@ class LinkTrustCore:
         o.valid[:] = self._valid
 
     # ------------------------------------------------------------------ API
+    @small_batch_serial
     def reset(self, seeds: np.ndarray | list[int], mask: np.ndarray | None = None) -> CoreStep:
         """Start (some) episodes and return their first pending features.
 
@@ -179,6 +205,7 @@ class LinkTrustCore:
             raise ValueError(f"trust must be finite; got {trust[tuple(bad)]} at index {tuple(bad.tolist())}")
         return trust
 
+    @small_batch_serial
     def step(self, trust: np.ndarray) -> CoreStep:
         """Apply ``trust`` (in [0, 1]; clipped) to the pending update and advance.
 

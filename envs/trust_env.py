@@ -16,7 +16,6 @@ from __future__ import annotations
 import warnings
 from typing import Any, Mapping, Sequence
 
-import numba
 import numpy as np
 from gymnasium.utils import seeding
 
@@ -35,10 +34,6 @@ INFO_KEYS = ("uav_reward",) + REWARD_TERMS + ("position_error",)
 _IDENTITY_FIELDS = ("name", "version")
 #: exclusive upper bound of the core's episode seeds
 _SEED_BOUND = 2**63 - 1
-#: below this batch size the core's parallel kernels run on the calling thread only: waking
-#: the thread pool costs more than it saves, and on a busy machine a parallel region can
-#: wait milliseconds for a descheduled worker
-SERIAL_BELOW = 32
 
 
 def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
@@ -211,7 +206,6 @@ class TrustEnvBatch:
         self.policy_flops = policy_flops
         self.processor = processor
         self._one_hot = kind_one_hot(self.layout.kind)
-        self._serial = batch_size < SERIAL_BELOW
 
     # ------------------------------------------------------------------ shapes
     @property
@@ -236,27 +230,14 @@ class TrustEnvBatch:
     # ------------------------------------------------------------------ dynamics
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> CoreStep:
         """Start the episodes in ``mask`` (all if None) with integer ``seeds`` ``(B,)``."""
-        return self._serially(self.core.reset, seeds, mask)
+        return self.core.reset(seeds, mask)
 
     def step(self, trust: np.ndarray) -> tuple[CoreStep, RewardTerms]:
         """Apply validated trust ``(B, N, L)`` in [0, 1]; returns the core step and reward terms ``(B, N)``."""
-        o = self._serially(self.core.step, trust)
+        o = self.core.step(trust)
         terms = standard_reward(o.estimate, o.truth, o.applied, o.prev_trust, o.valid, self.spec.filter.alpha_th,
                                 o.flops, self.policy_flops, self.reward_weights, self.processor)
         return o, terms
-
-    def _serially(self, call, *args):
-        """``call(*args)``, on the calling thread only when the batch is small (``SERIAL_BELOW``)."""
-        if not self._serial:
-            return call(*args)
-        threads = numba.get_num_threads()
-        if threads == 1:
-            return call(*args)
-        numba.set_num_threads(1)
-        try:
-            return call(*args)
-        finally:
-            numba.set_num_threads(threads)
 
     # ------------------------------------------------------------------ outputs
     def observation(self, out: np.ndarray | None = None) -> np.ndarray:
