@@ -21,11 +21,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numba
 import numpy as np
 
 from swarmloc.envs import cekf
 from swarmloc.envs.cekf_reference import run_reference
-from swarmloc.envs.core import LinkTrustCore
+from swarmloc.envs.core import SERIAL_BELOW, LinkTrustCore
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 
@@ -129,8 +130,14 @@ def time_kernel(rec: Recording, batch: int) -> float:
         x, P = rec.x0[:batch].copy(), rec.P0[:batch].copy()
         cekf.cekf_run(x, P, *args, est)
 
-    run()  # compile / warm caches
-    return _best_of(run, 3)
+    # small batches run on the calling thread, as the core runs them (envs.core.SERIAL_BELOW)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1 if batch < SERIAL_BELOW else threads)
+    try:
+        run()  # compile / warm caches
+        return _best_of(run, 3)
+    finally:
+        numba.set_num_threads(threads)
 
 
 def time_world(batch: int, n_steps: int) -> float:
@@ -151,8 +158,6 @@ def time_world(batch: int, n_steps: int) -> float:
 
 def machine_info() -> dict:
     """The machine the figures were measured on."""
-    import numba
-
     return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
             "cpu_count": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
             "numba": numba.__version__, "numba_threads": numba.get_num_threads()}
