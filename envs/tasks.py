@@ -102,7 +102,8 @@ def cascaded_fault() -> TaskSpec:
         anchors=THREE_ANCHORS,
         sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
         faults=Faults(imu_cascades=(ImuCascade(nodes=(1, 2), start=20.0, end=35.0, bias=(1.5, 1.2, 0.5)),)),
-        scoring=Scoring(healthy_nodes=(0, 3), fault_window=(20.0, 35.0)),
+        # madrl Exp. 5 scores the healthy nodes: no trust policy can correct a blind node
+        scoring=Scoring(nodes=(0, 3), healthy_nodes=(0, 3), fault_window=(20.0, 35.0)),
     )
 
 
