@@ -308,6 +308,10 @@ class DemoCommand:
     """Methods to compare (default: every registered method)."""
     plots: bool = True
     """Write the plots."""
+    leaderboard: bool = True
+    """Then load the shipped standard-v0 results into the store and show the leaderboard."""
+    db: str | None = None
+    """Leaderboard store URL (default: $SWARMLOC_DB or a SQLite file in the user data folder)."""
 
 
 @command("demo", help="Every shipped method on the quick suite: comparison table and plots.")
@@ -321,6 +325,16 @@ def run_demo_command(cfg: DemoCommand) -> int:
     run_demo(methods, get_suite(cfg.suite), cfg.out, workers=cfg.workers, plots=cfg.plots)
     if cfg.suite == "quick":  # the real flight joins the demo wherever its data is imported
         run_real_flight_demo(methods, cfg.out / "real-v0", workers=cfg.workers, plots=cfg.plots)
+    if cfg.leaderboard:
+        # bench does not depend on leaderboard: reach it the way the submit command is wired
+        try:
+            shipped = importlib.import_module("swarmloc.leaderboard.shipped")
+        except ModuleNotFoundError as err:
+            from rich.console import Console
+
+            Console().print(f"[yellow]leaderboard not shown:[/yellow] {err}")
+        else:
+            shipped.show_leaderboard(cfg.out, cfg.db)
     return 0
 
 

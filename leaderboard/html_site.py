@@ -254,7 +254,8 @@ def _method_html(entry: LeaderboardEntry, images: Sequence[Path], plot_error: st
     return _page(f"{entry.name} — swarmloc leaderboard", body, root="../")
 
 
-def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None = None) -> Path:
+def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None = None,
+                plots: bool = True) -> Path:
     """Write the static leaderboard site.
 
     Layout: ``index.html`` (one section per suite: ranked table, privileged table),
@@ -267,6 +268,8 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
         store: The store to read.
         out_dir: Output directory (created; files it already holds are overwritten).
         suite: Only this suite name (all suites when None).
+        plots: Draw each method's plots (re-runs the first seed of every task when the
+            results file has no traces beside it: minutes for a full suite).
 
     Returns:
         Path of ``index.html``.
@@ -284,7 +287,7 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
         plots_dir = out / "plots" / str(entry.id)
         if plots_dir.exists():
             shutil.rmtree(plots_dir)
-        images, error = _make_plots(results_file, plots_dir)
+        images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
         (out / "methods" / f"{entry.id}.html").write_text(
             _method_html(entry, images, error), encoding="utf-8"
         )

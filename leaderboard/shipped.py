@@ -1,0 +1,130 @@
+"""The shipped reference methods' standard-v0 results, loaded into a store.
+
+``leaderboard/results/<method>.json`` are the results files of the shipped methods on
+``standard-v0`` (written by ``swarmloc evaluate --suite standard-v0``, one per method;
+regenerate them with ``python -m swarmloc.leaderboard.shipped --regenerate``). They go
+into the store through the normal submit path with ``trust=True`` (no re-run: they are
+the reference methods) and every other check, so a fresh clone shows a populated
+leaderboard. Entries already in the store are left as they are.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from swarmloc.bench.results import load_results
+from swarmloc.leaderboard.errors import DuplicateSubmission
+from swarmloc.leaderboard.store import SHIPPED_REFERENCE_METHODS, LeaderboardStore
+from swarmloc.leaderboard.submit import submit
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+
+
+@dataclass(frozen=True)
+class ShippedLoad:
+    """What ``load_shipped`` did: methods stored now, already present, and refused (with why)."""
+
+    stored: tuple[str, ...]
+    present: tuple[str, ...]
+    refused: tuple[tuple[str, str], ...]
+
+
+def shipped_results(results_dir: Path = RESULTS_DIR) -> list[Path]:
+    """The shipped results files, in name order."""
+    return sorted(results_dir.glob("*.json"))
+
+
+def load_shipped(store: LeaderboardStore, results_dir: Path = RESULTS_DIR) -> ShippedLoad:
+    """Store every shipped results file not yet in ``store``.
+
+    Args:
+        store: an open leaderboard store.
+        results_dir: where the shipped results files are.
+
+    Returns:
+        A ``ShippedLoad`` summary. A file that fails validation is reported, not raised:
+        the others still load.
+    """
+    stored, present, refused = [], [], []
+    for path in shipped_results(results_dir):
+        results = load_results(path)
+        name = results.method.name
+        if name not in SHIPPED_REFERENCE_METHODS:
+            refused.append((path.name, f"{name!r} is not a shipped reference method"))
+            continue
+        metadata = {"name": name, "authors": "swarmloc reference", "track": results.method.track,
+                    "privileged": results.method.privileged,
+                    "description": f"shipped reference method {name!r}"}
+        try:
+            submit(path, results.method.entry_point, metadata, trust=True, store=store)
+        except DuplicateSubmission:
+            present.append(name)
+        except Exception as err:  # noqa: BLE001 - one bad file must not hide the others
+            refused.append((path.name, str(err)))
+        else:
+            stored.append(name)
+    return ShippedLoad(tuple(stored), tuple(present), tuple(refused))
+
+
+def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path:
+    """The main job's last step: load the shipped results into the store, print the
+    leaderboard, write its HTML site (without per-method plots; ``swarmloc leaderboard
+    html`` draws them) to ``out / "leaderboard"``.
+
+    Args:
+        out: the demo's output folder.
+        db_url: store URL (default: ``SWARMLOC_DB`` or the user data folder).
+        console: a rich console (default: a new one).
+
+    Returns:
+        The site's ``index.html``.
+    """
+    from rich.console import Console
+
+    from swarmloc.leaderboard.views import print_leaderboard, render_html
+
+    if console is None:
+        console = Console()
+        if not console.is_terminal:  # a pipe or a file: do not squeeze the per-task columns
+            console.width = max(console.width, 200)
+    with LeaderboardStore(db_url) as store:
+        loaded = load_shipped(store)
+        if loaded.stored:
+            console.print(f"stored the shipped standard-v0 results of {len(loaded.stored)} method(s)")
+        for name, why in loaded.refused:
+            console.print(f"[yellow]not stored {name}:[/yellow] {why}")
+        print_leaderboard(store, console=console)
+        # per-method plots would re-run episodes; the demo has drawn its own already
+        index = render_html(store, out / "leaderboard", plots=False)
+    console.print(f"leaderboard site: {index}")
+    return index
+
+
+def regenerate(methods: list[str], results_dir: Path = RESULTS_DIR, workers: int = 2) -> None:
+    """Re-evaluate ``methods`` on standard-v0 into ``results_dir`` (traces are not kept)."""
+    results_dir.mkdir(parents=True, exist_ok=True)
+    for name in methods:
+        out = results_dir / f"{name}.json"
+        subprocess.run([sys.executable, "-m", "swarmloc.bench.cli", "evaluate", "--method", name,
+                        "--suite", "standard-v0", "--out", str(out), "--workers", str(workers)], check=True)
+        out.with_suffix(".traces.npz").unlink(missing_ok=True)
+
+
+def main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--regenerate", nargs="*", metavar="METHOD",
+                        help="re-evaluate these shipped methods (all when none is named)")
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    if args.regenerate is not None:
+        methods = args.regenerate or sorted(path.stem for path in shipped_results())
+        regenerate(methods, workers=args.workers)
+
+
+if __name__ == "__main__":
+    main()

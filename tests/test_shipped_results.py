@@ -1,0 +1,35 @@
+"""The committed standard-v0 results of the shipped methods load into a fresh store."""
+
+from __future__ import annotations
+
+import pytest
+
+from swarmloc.bench.results import load_results
+from swarmloc.bench.suites import get_suite
+from swarmloc.leaderboard.shipped import load_shipped, shipped_results
+from swarmloc.leaderboard.store import LeaderboardStore
+
+FILES = shipped_results()
+
+
+def test_reference_methods_are_shipped():
+    names = {path.stem for path in FILES}
+    assert {"uniform", "oracle", "chi2-gate"} <= names
+
+
+@pytest.mark.parametrize("path", FILES, ids=[p.stem for p in FILES])
+def test_shipped_file_matches_the_current_suite(path):
+    results = load_results(path)
+    suite = get_suite("standard-v0")
+    assert results.suite.sha256 == suite.sha256, "stale: regenerate with python -m swarmloc.leaderboard.shipped --regenerate"
+    assert {(e.task, e.seed) for e in results.episodes} == set(suite.episodes)
+
+
+def test_shipped_results_populate_a_fresh_store_once(tmp_path):
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as store:
+        first = load_shipped(store)
+        assert first.refused == ()
+        assert sorted(first.stored) == sorted(load_results(p).method.name for p in FILES)
+        again = load_shipped(store)
+        assert again.stored == () and sorted(again.present) == sorted(first.stored)
+        assert store.count() == len(FILES)
