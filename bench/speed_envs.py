@@ -63,10 +63,8 @@ def gymnasium_row(n_steps: int) -> dict:
     return _row("gymnasium", 1, env.unwrapped.n_uav, n_steps, seconds)
 
 
-def pettingzoo_row(n_steps: int) -> dict:
-    import swarmloc.envs
-
-    env = swarmloc.envs.parallel_env(TASK)
+def _parallel_env_row(impl: str, env, n_steps: int) -> dict:
+    """Time ``n_steps`` random-action steps of a PettingZoo parallel env (resets included)."""
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     pool = [{a: rng.uniform(0, 1, env.action_space(a).shape).astype(np.float32) for a in env.possible_agents}
@@ -78,7 +76,14 @@ def pettingzoo_row(n_steps: int) -> dict:
             env.reset()
 
     seconds = _timed(step, n_steps, 100)
-    return _row("pettingzoo", 1, len(env.possible_agents), n_steps, seconds)
+    return _row(impl, 1, len(env.possible_agents), n_steps, seconds)
+
+
+def pettingzoo_row(n_steps: int) -> dict:
+    import swarmloc.envs
+
+    env = swarmloc.envs.parallel_env(TASK)
+    return _parallel_env_row("pettingzoo", env, n_steps)
 
 
 def vector_row(n_b: int, n_steps: int) -> dict:
@@ -119,18 +124,7 @@ def mpe2_row(n_steps: int) -> dict | None:
     except ImportError:
         return None
     env = simple_spread_v3.parallel_env(continuous_actions=True)
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    pool = [{a: rng.uniform(0, 1, env.action_space(a).shape).astype(np.float32) for a in env.possible_agents}
-            for _ in range(64)]
-
-    def step(k: int) -> None:
-        env.step(pool[k % 64])
-        if not env.agents:
-            env.reset()
-
-    seconds = _timed(step, n_steps, 100)
-    return _row("mpe2-simple-spread", 1, len(env.possible_agents), n_steps, seconds)
+    return _parallel_env_row("mpe2-simple-spread", env, n_steps)
 
 
 def vmas_row(n_b: int, n_steps: int) -> dict | None:
