@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pydantic
 import pytest
 
@@ -26,3 +27,19 @@ def skip_without_data(task_id: str) -> None:
     why = data_missing(get_spec(task_id))
     if why:
         pytest.skip(f"{task_id}: {why.splitlines()[0]}")
+
+
+def assert_same(a, b) -> None:
+    """Exact equality of nested tuples / dicts / arrays / scalars."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            assert_same(a[key], b[key])
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            assert_same(x, y)
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    else:
+        assert a == b

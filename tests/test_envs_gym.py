@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 import swarmloc.envs  # noqa: F401  (registers the tasks)
 from swarmloc.envs.tasks import CATALOGUE, get_spec
 
-from envs_helpers import short, skip_without_data
+from envs_helpers import assert_same, short, skip_without_data
 
 TASKS = sorted(CATALOGUE)
 
@@ -28,22 +28,6 @@ def rollout(env: gym.Env, seed: int, n_steps: int) -> list[tuple]:
         if terminated or truncated:
             out.append(env.reset())
     return out
-
-
-def assert_same(a, b) -> None:
-    """Exact equality of nested tuples / dicts / arrays / scalars."""
-    if isinstance(a, dict):
-        assert a.keys() == b.keys()
-        for key in a:
-            assert_same(a[key], b[key])
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b)
-        for x, y in zip(a, b):
-            assert_same(x, y)
-    elif isinstance(a, np.ndarray):
-        assert a.dtype == b.dtype and np.array_equal(a, b)
-    else:
-        assert a == b
 
 
 @pytest.mark.parametrize("task_id", TASKS)

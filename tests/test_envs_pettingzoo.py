@@ -10,7 +10,7 @@ from pettingzoo.test import api_test, parallel_api_test
 import swarmloc.envs
 from swarmloc.envs.tasks import CATALOGUE
 
-from envs_helpers import short, skip_without_data
+from envs_helpers import assert_same, short, skip_without_data
 
 TASKS = sorted(CATALOGUE)
 
@@ -40,21 +40,6 @@ def rollout(env, seed: int, n_steps: int) -> list:
         step = env.step({a: env.action_space(a).sample() for a in env.agents})
         out.append(step + (env.state(),))
     return out
-
-
-def assert_same(a, b) -> None:
-    if isinstance(a, dict):
-        assert a.keys() == b.keys()
-        for key in a:
-            assert_same(a[key], b[key])
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b)
-        for x, y in zip(a, b):
-            assert_same(x, y)
-    elif isinstance(a, np.ndarray):
-        assert np.array_equal(a, b)
-    else:
-        assert a == b
 
 
 @pytest.mark.parametrize("task_id", ["swarmloc/NLOS-v0", "swarmloc/CascadedFaultRandom-v0",
