@@ -11,8 +11,13 @@ CleanRL style: the configuration and the training loop are here, the torch modul
   with its own PPO ratio and its UAV's advantage (per-UAV standard reward v0).
 * **Exploration**: σ starts at 2 in logit space (α spans ≈ 0.04 … 0.99), because
   isolating a faulty link only pays off close to α → 0 (R = R0/α), far from any initial
-  trust; each draw is held for ``noise_hold`` steps (1 s) so that it moves the filter's
-  error visibly instead of adding per-step jitter (``HeldNoise``).
+  trust. A fresh draw every step (``noise_hold`` = 1), low-passed by the smoother below.
+* **Smoothing in the loop** (madrl Algorithm 1): while training, the env applies the
+  adaptively smoothed α_eff (eq. 15–17, the execution-time β_max and γ), not the raw
+  sample. Per-step exploration noise then reaches the filter — and the reward's jitter
+  term — low-passed, instead of being paid in full as jitter. Without it (the first
+  shipped runs) the λ3 = 5 jitter penalty pulled the nine-task policy to α ≈ 1 on every
+  link within ≈ 80k frames.
 * **Critic** (``SwarmCritic``): centralized, training only. It sees the whole swarm (every
   UAV's channels, the env's ``"state"``, and — privileged, since it never runs at
   execution — each UAV's position error) and is permutation-invariant over UAVs, so one
@@ -45,7 +50,7 @@ from swarmloc.envs.reward import RewardWeights
 from swarmloc.envs.tasks import get_spec
 
 from .mappo_nets import G, build_modules
-from .mappo_policy import MappoPolicy, count_flops_per_channel
+from .mappo_policy import BETA_MAX, SMOOTHING_GAMMA, MappoPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
 #: the training mixture (madrl Exp. 1, 2/4/6, 3, 5)
@@ -110,8 +115,14 @@ class MappoConfig:
     init_log_std: float = 0.7
     """initial log σ of the Gaussian on the trust logit: σ = 2 spans α ≈ 0.04 … 0.99, because
     isolation only pays off near α → 0 (R = R0/α), far from the initial trust"""
-    noise_hold: int = 10
-    """steps (0.1 s each) an exploration draw is held: long enough to move the filter's error"""
+    noise_hold: int = 1
+    """steps (0.1 s each) an exploration draw is held (1: a new draw every step; with
+    ``train_smoothing`` the smoother low-passes it. Without, 10 moves the filter's error visibly)"""
+    train_smoothing: bool = True
+    """apply the adaptive Markov smoothing in the training loop, as at execution (madrl Algorithm 1):
+    the env gets α_eff, and the per-step exploration noise reaches filter and jitter term low-passed"""
+    smoothing: tuple[float, float] = (BETA_MAX, SMOOTHING_GAMMA)
+    """(β_max, γ) of the in-loop smoothing (the execution-time values)"""
     accuracy_only: bool = False
     """madrl Exp. 7 ablation: λ = 0 for delay, energy and jitter"""
     eval_every: int = 500_000
@@ -140,6 +151,10 @@ class MappoConfig:
         if (self.num_envs * self.rollout_steps) % self.minibatches:
             raise ValueError(f"num_envs·rollout_steps = {self.num_envs * self.rollout_steps} must be divisible by "
                              f"minibatches = {self.minibatches}")
+        beta_max, gamma = self.smoothing
+        if not (0.0 <= beta_max < 1.0 and gamma >= 0.0):
+            raise ValueError(f"smoothing = (beta_max, gamma) needs beta_max in [0, 1) and gamma >= 0, "
+                             f"got {self.smoothing!r}")
         if not (0.0 < self.gamma <= 1.0 and 0.0 <= self.gae_lambda <= 1.0):
             raise ValueError(f"gamma must be in (0, 1] and gae_lambda in [0, 1], got {self.gamma}, {self.gae_lambda}")
 
@@ -255,7 +270,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     writer = writer or SummaryWriter(str(run_dir))
     writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
-    actor_net, prob_actor, policy, critic, noise = build_modules(cfg)
+    actor_net, prob_actor, policy, critic, noise, smoother = build_modules(cfg)
     flops_per_channel = count_flops_per_channel(actor_net) + SMOOTHING_FLOPS_PER_CHANNEL
 
     # ---- one batched env + collector per task; training seeds only
@@ -314,6 +329,8 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
             envs[t].set_seed(base)
         tic = time.perf_counter()
         noise.start_batch()
+        if smoother is not None:
+            smoother.select(t, fresh=steps_done[t] % n_steps == 0)
         batch = next(iterators[t])  # (B, T)
         t_collect = time.perf_counter() - tic
         steps_done[t] += cfg.rollout_steps

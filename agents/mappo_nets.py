@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import nn
 
-from swarmloc.envs.observation import N_FEATURES, VALID, squash
+from swarmloc.envs.observation import INNOVATION, N_FEATURES, SCALE_INNOVATION, VALID, squash
 
 from .mappo_policy import ChannelActor
 
@@ -153,6 +153,50 @@ class HeldNoise(nn.Module):
         return self._eps
 
 
+class LoopSmoother(nn.Module):
+    """Adaptive Markov smoothing inside the training loop (madrl Algorithm 1, phase 2).
+
+    The env applies α_eff = β α_eff(k−1) + (1 − β) α_raw, β = β_max exp(−γ |r(k) − r(k−1)|),
+    exactly what ``MarkovSmoothing`` does at execution, so the policy is trained in the
+    loop it runs in: its per-step exploration noise reaches the filter (and the jitter
+    term of the reward) low-passed. r is read back from the observation's innovation
+    feature (``unsquash``; float32). Absent channels keep α_eff and r.
+
+    Episodes of different tasks interleave (one collector per task, cycled per batch), so
+    the state is kept per task: ``select(task, fresh)`` before each batch picks it, and
+    ``fresh=True`` (a batch that starts an episode) restarts it at α_eff = 1, r = 0.
+
+    Args:
+        beta_max, gamma: β_max and γ [1/m] (the execution-time values).
+    """
+
+    def __init__(self, beta_max: float, gamma: float) -> None:
+        super().__init__()
+        self.beta_max = float(beta_max)
+        self.gamma = float(gamma)
+        self._states: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+        self._key = 0
+
+    def select(self, key: int, fresh: bool) -> None:
+        self._key = key
+        if fresh:
+            self._states.pop(key, None)
+
+    def forward(self, raw: torch.Tensor, obs: torch.Tensor) -> torch.Tensor:
+        valid = obs[..., VALID] > 0.5
+        y = obs[..., INNOVATION]
+        resid = SCALE_INNOVATION * y / (1.0 - y).clamp(min=1e-6)  # unsquash
+        state = self._states.get(self._key)
+        if state is None or state[0].shape != raw.shape:
+            state = (torch.ones_like(raw), torch.zeros_like(raw))
+        alpha_prev, resid_prev = state
+        # β = β_max exp(−γ Δr);  α_eff = β α_eff(k−1) + (1 − β) α_raw
+        beta = self.beta_max * torch.exp(-self.gamma * (resid - resid_prev).abs())
+        alpha = torch.where(valid, beta * alpha_prev + (1.0 - beta) * raw, alpha_prev)
+        self._states[self._key] = (alpha.detach(), torch.where(valid, resid, resid_prev).detach())
+        return alpha
+
+
 class _ActorParams(nn.Module):
     """``ChannelActor`` → (μ, σ, valid) per channel, the inputs of ``MaskedNormal``."""
 
@@ -174,8 +218,9 @@ def build_modules(cfg: "MappoConfig") -> tuple:
     """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module.
 
     Returns:
-        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise),
-        critic TensorDictModule, the HeldNoise module)``.
+        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise,
+        then the in-loop smoother if ``cfg.train_smoothing``), critic TensorDictModule, the
+        HeldNoise module, the LoopSmoother or None)``.
     """
     # torchrl is imported here, not at the top, so that the CLI can read MappoConfig quickly
     from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
@@ -189,16 +234,21 @@ def build_modules(cfg: "MappoConfig") -> tuple:
         params, in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid")},
         out_keys=[(G, "trust_logit")], distribution_class=MaskedNormal, return_log_prob=True,
         log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[(G, "action")])
+    smoother = LoopSmoother(*cfg.smoothing) if cfg.train_smoothing else None
+    trust_key = (G, "raw_trust") if smoother is not None else (G, "action")
+    to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[trust_key])
     # acting: the same parameters, with exploration noise held over cfg.noise_hold steps
     noise = HeldNoise(cfg.noise_hold)
     sample = ProbabilisticTensorDictModule(
         in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
         out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
         log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    policy = TensorDictSequential(params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]),
-                                  sample, to_trust)
+    acting = [params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]), sample, to_trust]
+    if smoother is not None:
+        acting.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
+                                       out_keys=[(G, "action")]))
+    policy = TensorDictSequential(*acting)
     critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
     critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,
                               out_keys=[(G, "state_value")])
-    return actor_net, prob_actor, policy, critic, noise
+    return actor_net, prob_actor, policy, critic, noise, smoother
