@@ -248,3 +248,62 @@ def test_cli_registers_train_mappo_and_reproduce_madrl():
     from swarmloc.bench.cli_commands import GROUPS
 
     assert "mappo" in GROUPS["train"] and "madrl" in GROUPS["reproduce"]
+
+
+def test_loop_smoother_equals_execution_smoothing():
+    """The training-time smoother applies exactly ``smooth_step`` (madrl eq. 15–17), state per task."""
+    from swarmloc.agents.mappo_nets import LoopSmoother
+    from swarmloc.agents.smoothing import smooth_step
+    from swarmloc.envs.observation import INNOVATION, SCALE_INNOVATION, squash
+
+    rng = np.random.default_rng(5)
+    shape = (3, 4, 6)
+    smoother = LoopSmoother(0.85, 2.0)
+    alpha_ref, resid_ref = np.ones(shape), np.zeros(shape)
+    other = None
+    for k in range(30):
+        resid = rng.exponential(0.5, shape)
+        valid = rng.uniform(size=shape) > 0.2
+        raw = rng.uniform(size=shape)
+        obs = np.zeros((*shape, N_FEATURES), dtype=np.float32)
+        obs[..., INNOVATION] = squash(resid, SCALE_INNOVATION)
+        obs[..., VALID] = valid
+        resid32 = SCALE_INNOVATION * obs[..., INNOVATION].astype(np.float64) / (1.0 - obs[..., INNOVATION])
+        smoother.select(0, fresh=k == 0)
+        out = smoother(torch.as_tensor(raw, dtype=torch.float32), torch.as_tensor(obs)).numpy()
+        alpha_ref = smooth_step(alpha_ref, raw, resid_ref, resid32, valid, 0.85, 2.0)
+        resid_ref = np.where(valid, resid32, resid_ref)
+        np.testing.assert_allclose(out, alpha_ref, atol=1e-5)
+        if k == 10:  # another task's batch in between leaves task 0's state alone
+            smoother.select(1, fresh=True)
+            other = smoother(torch.full((2, 2, 2), 0.3), torch.zeros((2, 2, 2, N_FEATURES))).numpy()
+    assert np.all(other == 1.0)  # absent channels (valid = 0) keep α_eff(0) = 1
+    smoother.select(0, fresh=True)  # a new episode restarts at α_eff = 1
+    obs = np.zeros((*shape, N_FEATURES), dtype=np.float32)
+    obs[..., VALID] = 1.0
+    out = smoother(torch.zeros(shape), torch.as_tensor(obs)).numpy()
+    np.testing.assert_allclose(out, 0.85, atol=1e-6)  # β = β_max (Δr = 0): 0.85·1 + 0.15·0
+
+
+def test_smoothing_keeps_the_total_variation_of_a_step():
+    """Why smoothing cannot cut the jitter of a clean switching policy: a first-order low-pass
+    moves α_eff monotonically towards a held α_raw (a convex combination), so a step's
+    Σ|Δα| is kept, only spread in time; only oscillation is removed."""
+    from swarmloc.agents.smoothing import smooth_step
+
+    raw = np.r_[np.ones(20), np.full(60, 0.05), np.ones(60)]
+    resid = np.r_[np.full(20, 0.1), np.full(60, 3.0), np.full(60, 0.1)]
+    alpha, r_prev, path = np.ones(1), np.zeros(1), []
+    for a, r in zip(raw, resid):
+        alpha = smooth_step(alpha, np.array([a]), r_prev, np.array([r]), np.ones(1, bool), 0.85, 2.0)
+        r_prev = np.array([r])
+        path.append(alpha[0])
+    tv_raw, tv_smooth = np.abs(np.diff(np.r_[1.0, raw])).sum(), np.abs(np.diff(np.r_[1.0, path])).sum()
+    assert tv_smooth == pytest.approx(tv_raw, rel=1e-3)
+    # an oscillating raw trust, on the other hand, is smoothed: |Δα| falls by ≥ 3×
+    osc = np.where(np.arange(140) % 2, 0.3, 0.9)
+    alpha, path = np.ones(1), []
+    for a in osc:
+        alpha = smooth_step(alpha, np.array([a]), np.zeros(1), np.zeros(1), np.ones(1, bool), 0.85, 2.0)
+        path.append(alpha[0])
+    assert np.abs(np.diff(path[20:])).mean() < np.abs(np.diff(osc[20:])).mean() / 3
