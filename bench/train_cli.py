@@ -129,6 +129,7 @@ def train_mappo(config: TrainMappoArgs) -> Path:
     check_training_seeds([config.seed])
     evaluate = dev_evaluator(config.eval_seeds) if config.eval_seeds > 0 else None
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    commit = git_commit()  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
     out = Path(config.weights_out) if config.weights_out else Path(config.run_dir) / "mappo.pt"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -142,7 +143,7 @@ def train_mappo(config: TrainMappoArgs) -> Path:
         "iterations": result.iterations,
         "wall_time_s": round(result.wall_time_s, 1),
         "started": started,
-        "git_commit": git_commit(),
+        "git_commit": commit,
         "torch": torch.__version__,
         "machine": f"{os.cpu_count()} CPU(s), {config.threads} thread(s)",
         "episode_seeds": {"count": len(result.episode_seeds), "min": min(result.episode_seeds),
