@@ -29,8 +29,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from swarmloc.envs.channels import ChannelLayout
-from swarmloc.envs.observation import INNOVATION, N_FEATURES, NIS, VALID
+from swarmloc.envs.channels import N_KINDS, ChannelLayout
+from swarmloc.envs.observation import INNOVATION, KIND0, N_FEATURES, NIS, VALID
 
 from .protocols import TrustInput
 from .smoothing import MarkovSmoothing
@@ -169,13 +169,40 @@ def count_flops_per_channel(actor: ChannelActor) -> float:
     return float(counter.get_total_flops() + 2 * units + 4 + context)
 
 
+def trained_kinds(tasks) -> np.ndarray:
+    """``(N_KINDS,)`` bool: the channel kinds (anchor, peer, landmark, GPS, relative position)
+    that occur in any of ``tasks`` (registered IDs), i.e. that a policy trained on them has seen."""
+    from swarmloc.envs.channels import build_layout
+    from swarmloc.envs.tasks import get_spec
+
+    seen = np.zeros(N_KINDS, dtype=bool)
+    for task in tasks:
+        layout = build_layout(get_spec(task))
+        seen[np.unique(layout.kind[layout.linked])] = True
+    return seen
+
+
+def weights_kinds(weights: str | Path) -> np.ndarray | None:
+    """The channel kinds the weights were trained on, from the training tasks in their
+    provenance record (``<name>.json``); None (every kind) without a record."""
+    tasks = weights_metadata(weights).get("config", {}).get("tasks")
+    return trained_kinds(tasks) if tasks else None
+
+
 class MappoPolicy:
     """The trained MAPPO actor as a ``LinkTrustPolicy`` (numpy in, numpy out).
+
+    A learned policy is only defined where it was trained: channels of a kind that its
+    training tasks never had (``kinds``; e.g. GPS and relative-position links for the
+    shipped weights, trained on UWB ranging tasks) get the nominal trust α = 1, i.e. the
+    plain CEKF, instead of the output of a network that never saw such inputs.
 
     Args:
         actor: a ``ChannelActor`` (e.g. from ``load_actor``).
         isolation: False → trust fixed at 1 (the madrl "no evaluation" ablation; the
             network is not run and costs no FLOPs).
+        kinds: ``(N_KINDS,)`` bool, the channel kinds the actor decides (default: all;
+            ``weights_kinds`` reads them from a weights file's record).
 
     Attributes:
         privileged: False (reads only the observation).
@@ -186,9 +213,15 @@ class MappoPolicy:
     privileged = False
     deterministic = True
 
-    def __init__(self, actor: ChannelActor, isolation: bool = True) -> None:
+    def __init__(self, actor: ChannelActor, isolation: bool = True, kinds: np.ndarray | None = None) -> None:
         self.actor = actor.eval()
         self.isolation = bool(isolation)
+        if kinds is None:
+            kinds = np.ones(N_KINDS, dtype=bool)
+        kinds = np.asarray(kinds, dtype=bool)
+        if kinds.shape != (N_KINDS,):
+            raise ValueError(f"kinds must be a ({N_KINDS},) bool mask over the channel kinds, got shape {kinds.shape}")
+        self.kinds = kinds
         self.flops_per_channel = count_flops_per_channel(actor) if self.isolation else 0.0
         self._shape: tuple[int, int, int] = (0, 0, 0)
 
@@ -209,11 +242,14 @@ class MappoPolicy:
             # a copy: the caller's buffers are read-only views that it reuses
             alpha = self.actor.trust(torch.tensor(obs, dtype=torch.float32))
         out = alpha.numpy().astype(np.float64)
-        # absent channels are skipped by the CEKF anyway; report full trust there
-        return np.where(obs[..., VALID] > 0.5, out, 1.0)
+        # absent channels are skipped by the CEKF anyway, and kinds the actor was not
+        # trained on get the nominal trust: report full trust there
+        decided = (obs[..., VALID] > 0.5) & (obs[..., KIND0:KIND0 + N_KINDS] @ self.kinds.astype(np.float32) > 0.5)
+        return np.where(decided, out, 1.0)
 
     def __repr__(self) -> str:
-        return f"MappoPolicy(isolation={self.isolation}, flops_per_channel={self.flops_per_channel:.0f})"
+        return (f"MappoPolicy(isolation={self.isolation}, kinds={self.kinds.astype(int).tolist()}, "
+                f"flops_per_channel={self.flops_per_channel:.0f})")
 
 
 def weights_metadata(weights: str | Path) -> dict:
@@ -229,23 +265,26 @@ def _weights(weights: str | Path | None, default: str) -> Path:
     return Path(weights) if weights is not None else WEIGHTS_DIR / default
 
 
+def _policy(weights: str | Path | None, default: str, isolation: bool = True) -> MappoPolicy:
+    path = _weights(weights, default)
+    return MappoPolicy(load_actor(path), isolation=isolation, kinds=weights_kinds(path))
+
+
 def mappo(weights: str | Path | None = None) -> MarkovSmoothing:
     """``mappo``: shipped weights, deterministic actor + adaptive Markov smoothing (β_max 0.85, γ 2)."""
-    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo.pt"))), BETA_MAX, SMOOTHING_GAMMA)
+    return MarkovSmoothing(_policy(weights, "mappo.pt"), BETA_MAX, SMOOTHING_GAMMA)
 
 
 def mappo_no_smoothing(weights: str | Path | None = None) -> MappoPolicy:
     """``mappo-no-smoothing``: the same weights, raw α applied (madrl Exp. 6)."""
-    return MappoPolicy(load_actor(_weights(weights, "mappo.pt")))
+    return _policy(weights, "mappo.pt")
 
 
 def mappo_no_isolation(weights: str | Path | None = None) -> MarkovSmoothing:
     """``mappo-no-isolation``: trust fixed at 1 after training, smoothing kept (madrl Exp. 6 "no evaluation")."""
-    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo.pt")), isolation=False), BETA_MAX,
-                           SMOOTHING_GAMMA)
+    return MarkovSmoothing(_policy(weights, "mappo.pt", isolation=False), BETA_MAX, SMOOTHING_GAMMA)
 
 
 def mappo_accuracy_only(weights: str | Path | None = None) -> MarkovSmoothing:
     """``mappo-accuracy-only``: weights trained with λ_delay = λ_energy = λ_jitter = 0 (madrl Exp. 7) + smoothing."""
-    return MarkovSmoothing(MappoPolicy(load_actor(_weights(weights, "mappo_accuracy_only.pt"))), BETA_MAX,
-                           SMOOTHING_GAMMA)
+    return MarkovSmoothing(_policy(weights, "mappo_accuracy_only.pt"), BETA_MAX, SMOOTHING_GAMMA)

@@ -307,3 +307,32 @@ def test_smoothing_keeps_the_total_variation_of_a_step():
         alpha = smooth_step(alpha, np.array([a]), np.zeros(1), np.zeros(1), np.ones(1, bool), 0.85, 2.0)
         path.append(alpha[0])
     assert np.abs(np.diff(path[20:])).mean() < np.abs(np.diff(osc[20:])).mean() / 3
+
+
+def test_channel_kinds_outside_training_get_nominal_trust():
+    """Channels of kinds the weights never saw in training (from their record) get α = 1."""
+    from swarmloc.agents.mappo_policy import trained_kinds, weights_kinds
+    from swarmloc.envs.channels import ANCHOR, GPS, N_KINDS, PEER, PEER_REL
+    from swarmloc.envs.observation import KIND0
+
+    np.testing.assert_array_equal(trained_kinds(["NLOS-v0", "Scale2-v0"]), np.eye(N_KINDS, dtype=bool)[[ANCHOR, PEER]].any(0))
+    assert trained_kinds(["GradualFault-v0"])[[GPS, PEER_REL]].all()
+    meta = json.loads(SHIPPED.with_suffix(".json").read_text())
+    np.testing.assert_array_equal(weights_kinds(SHIPPED), trained_kinds(meta["config"]["tasks"]))
+    assert weights_kinds(Path("/nonexistent/mappo.pt")) is None  # no record: every kind
+
+    rng = np.random.default_rng(1)
+    obs = _random_obs(rng, 2, 3, 5)
+    obs[..., KIND0:KIND0 + N_KINDS] = 0.0
+    for channel, kind in enumerate([ANCHOR, PEER, GPS, PEER_REL, ANCHOR]):
+        obs[..., channel, KIND0 + kind] = 1.0
+    actor = ChannelActor(N_FEATURES, (16, 8), init_trust=0.3)
+    everything = MappoPolicy(actor)
+    some = MappoPolicy(actor, kinds=trained_kinds(["NLOS-v0"]))
+    for policy in (everything, some):
+        policy.reset(2, _layout(3, 5), np.arange(2))
+    a_all, a_some = everything.act(_trust_input(obs)), some.act(_trust_input(obs))
+    np.testing.assert_array_equal(a_some[..., [0, 1, 4]], a_all[..., [0, 1, 4]])
+    assert np.all(a_some[..., [2, 3]] == 1.0) and np.all(a_all < 1.0)
+    with pytest.raises(ValueError, match="kinds"):
+        MappoPolicy(actor, kinds=np.ones(3, bool))
