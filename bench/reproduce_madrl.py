@@ -212,7 +212,7 @@ def exp6(runs: Runs, seeds: list[int]) -> list[str]:
         rows.append([m, _fmt(runs.mean(task, m, "fault_rmse"), 4), _fmt(runs.mean(task, m, "jitter"), 4),
                      _fmt(runs.mean(task, m, "weight_var"), 4), "—" if paper is None else f"{paper:.4f}"])
     lines = ["## Exp. 6 — ablations (Tables 7, 8), NLOSStep-v0", ""] + _table(
-        ["group", "fault RMSE [m]", "jitter mean |Δα|", "weight variance", "paper interference RMSE"], rows)
+        ["group", "fault RMSE [m]", "jitter mean \\|Δα\\|", "weight variance", "paper interference RMSE"], rows)
     # Table 8: smoothing sensitivity γ, same weights
     from swarmloc.agents.mappo_policy import BETA_MAX, MappoPolicy, load_actor
     from swarmloc.agents.smoothing import MarkovSmoothing
@@ -228,7 +228,7 @@ def exp6(runs: Runs, seeds: list[int]) -> list[str]:
         rows.append([f"{gamma:g}", _fmt(float(np.mean([m["fault_rmse"] for m in metrics])), 4),
                      _fmt(float(np.mean([m["jitter"] for m in metrics])), 4), f"{paper:.4f}"])
     return lines + ["", "Smoothing sensitivity (β_max = 0.85):", ""] + _table(
-        ["γ", "fault RMSE [m]", "jitter mean |Δα|", "paper fault RMSE"], rows)
+        ["γ", "fault RMSE [m]", "jitter mean \\|Δα\\|", "paper fault RMSE"], rows)
 
 
 def exp7(runs: Runs, have_accuracy_only: bool) -> list[str]:
