@@ -214,15 +214,14 @@ def exp6(runs: Runs, seeds: list[int]) -> list[str]:
     lines = ["## Exp. 6 — ablations (Tables 7, 8), NLOSStep-v0", ""] + _table(
         ["group", "fault RMSE [m]", "jitter mean \\|Δα\\|", "weight variance", "paper interference RMSE"], rows)
     # Table 8: smoothing sensitivity γ, same weights
-    from swarmloc.agents.mappo_policy import BETA_MAX, MappoPolicy, load_actor
+    from swarmloc.agents.mappo_policy import BETA_MAX, WEIGHTS_DIR, MappoPolicy, load_actor, weights_kinds
     from swarmloc.agents.smoothing import MarkovSmoothing
 
-    weights = runs.weights.get("mappo")
-    actor = load_actor(weights) if weights else load_actor(Path(__file__).resolve().parents[1] / "agents" /
-                                                           "weights" / "mappo.pt")
+    weights = Path(runs.weights.get("mappo") or WEIGHTS_DIR / "mappo.pt")
+    actor, kinds = load_actor(weights), weights_kinds(weights)  # as the registered ``mappo`` builds it
     rows = []
     for gamma, paper in PAPER["table8"].items():
-        method = MarkovSmoothing(MappoPolicy(actor), BETA_MAX, gamma)
+        method = MarkovSmoothing(MappoPolicy(actor, kinds=kinds), BETA_MAX, gamma)
         metrics, _ = rollout(LoadedMethod(f"mappo-gamma{gamma}", "mappo", "A", False, True, method),
                              get_spec(task), seeds)
         rows.append([f"{gamma:g}", _fmt(float(np.mean([m["fault_rmse"] for m in metrics])), 4),
