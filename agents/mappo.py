@@ -29,7 +29,7 @@ CleanRL style: the configuration and the training loop are here, the torch modul
 At execution the actor is deterministic and wrapped in adaptive Markov smoothing
 (madrl eq. 15–17), see ``mappo_policy.py``.
 
-Run: ``swarmloc train mappo --frames 1000000`` (``swarmloc.bench.train_cli``: seed checks,
+Run: ``swarmloc train mappo --frames 1000000`` (``swarmloc.bench.training.mappo``: seed checks,
 dev-seed evaluation, provenance) or ``python -m swarmloc.agents.mappo --frames 1600``.
 """
 
@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -46,129 +46,18 @@ import torch
 
 from swarmloc.envs import torchrl_env
 from swarmloc.envs.observation import N_FEATURES, VALID
-from swarmloc.envs.reward import RewardWeights
+from swarmloc.envs.seeds import TRAINING_SEED_LIMIT
 from swarmloc.envs.tasks import get_spec
 
 from .mappo_nets import G, build_modules
-from .mappo_policy import BETA_MAX, SMOOTHING_GAMMA, MappoPolicy, count_flops_per_channel
+from .mappo_config import DEFAULT_TASKS, MappoConfig  # noqa: F401  (re-exported)
+from .mappo_policy import MappoPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
-#: the training mixture (madrl Exp. 1, 2/4/6, 3, 5)
-DEFAULT_TASKS: tuple[str, ...] = (
-    "NLOS-v0", "NLOSStep-v0", "Scale2-v0", "Scale4-v0", "Scale6-v0", "Scale8-v0",
-    "CascadedFault-v0", "CascadedFaultRandom-v0", "Ideal-v0",
-)
-#: exclusive upper bound of training episode seeds (``swarmloc.bench.suites``)
-TRAINING_SEED_LIMIT = 1_000_000
 #: where the per-UAV reward terms live in the env's tensordict, and their TensorBoard names
 REWARD_TERMS = {"accuracy": "reward_accuracy", "delay_penalty": "reward_delay", "energy_penalty": "reward_energy",
                 "jitter_penalty": "reward_jitter", "position_error": "position_error", "delay_ms": "delay_ms"}
 
-
-@dataclass
-class MappoConfig:
-    """Hyper-parameters of a MAPPO link-trust training run."""
-
-    tasks: tuple[str, ...] = DEFAULT_TASKS
-    """training tasks (registered IDs, ``swarmloc/`` prefix optional); one collector each, cycled per batch"""
-    frames: int = 1_000_000
-    """total environment frames (one frame = one env step of one episode, all its UAVs and channels)"""
-    seed: int = 1
-    """run seed: torch's generator and the training episode seeds derive from it (must be < 1_000_000)"""
-    num_envs: int = 16
-    """episodes stepped together per task (the env's batch size B)"""
-    rollout_steps: int = 100
-    """steps per collector batch; a divisor of every task's episode length keeps seeds aligned"""
-    epochs: int = 3
-    """PPO epochs over each batch"""
-    minibatches: int = 8
-    """minibatches per epoch (small minibatches: many optimizer steps per frame, frames are dear)"""
-    learning_rate: float = 2e-3
-    """Adam learning rate (linearly annealed to 0)"""
-    anneal_lr: bool = True
-    """linearly anneal the learning rate over the run"""
-    gamma: float = 0.95
-    """discount per 0.1 s step (horizon ≈ 2 s, the CEKF's error memory)"""
-    gae_lambda: float = 0.9
-    """GAE λ"""
-    clip_epsilon: float = 0.2
-    """PPO ratio clip"""
-    entropy_coef: float = 1e-3
-    """entropy bonus weight"""
-    critic_coef: float = 0.5
-    """value loss weight"""
-    max_grad_norm: float = 0.5
-    """gradient clipping (global norm)"""
-    reward_scale: float = 0.1
-    """rewards are multiplied by this before GAE (returns of order 1 for the critic)"""
-    hidden: tuple[int, ...] = (128, 64)
-    """actor hidden widths (madrl §2.2.2: 128, 64)"""
-    channel_context: bool = True
-    """each channel also sees its UAV's mean innovation and NIS (False: the paper's per-channel input only)"""
-    critic_hidden: int = 64
-    """critic embedding width"""
-    privileged_critic: bool = True
-    """the critic also sees each UAV's true position error (training only; the actor never does)"""
-    init_trust: float = 0.5
-    """trust the untrained actor outputs (0.5: the logit's middle, where no side of the jitter-driven pull
-    towards saturation at 0 or 1 is favoured before the accuracy term decides)"""
-    init_log_std: float = 0.7
-    """initial log σ of the Gaussian on the trust logit: σ = 2 spans α ≈ 0.04 … 0.99, because
-    isolation only pays off near α → 0 (R = R0/α), far from the initial trust"""
-    noise_hold: int = 1
-    """steps (0.1 s each) an exploration draw is held (1: a new draw every step; with
-    ``train_smoothing`` the smoother low-passes it. Without, 10 moves the filter's error visibly)"""
-    train_smoothing: bool = True
-    """apply the adaptive Markov smoothing in the training loop, as at execution (madrl Algorithm 1):
-    the env gets α_eff, and the per-step exploration noise reaches filter and jitter term low-passed"""
-    smoothing: tuple[float, float] = (BETA_MAX, SMOOTHING_GAMMA)
-    """(β_max, γ) of the in-loop smoothing (the execution-time values)"""
-    accuracy_only: bool = False
-    """madrl Exp. 7 ablation: λ = 0 for delay, energy and jitter"""
-    eval_every: int = 500_000
-    """frames between dev-seed evaluations (needs an evaluator; 0 = only at the end)"""
-    checkpoint_every: int = 500_000
-    """frames between checkpoints in ``run_dir`` (0 = only at the end)"""
-    run_dir: str = "runs/mappo"
-    """TensorBoard logs and checkpoints go here"""
-    threads: int = 1
-    """torch and numba threads (1: deterministic and polite on a shared machine)"""
-    progress: bool = True
-    """show a tqdm progress bar"""
-    reward_weights: dict = field(default_factory=dict)
-    """extra ``RewardWeights`` overrides (advanced; ``accuracy_only`` sets delay/energy/jitter to 0)"""
-
-    def __post_init__(self) -> None:
-        if not self.tasks:
-            raise ValueError("tasks must name at least one task")
-        for name in ("frames", "num_envs", "rollout_steps", "epochs", "minibatches", "threads"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
-        if not 0 <= self.seed < TRAINING_SEED_LIMIT:
-            raise ValueError(f"seed must be a training seed in [0, {TRAINING_SEED_LIMIT}), got {self.seed!r}")
-        if self.noise_hold < 1 or self.rollout_steps % self.noise_hold:
-            raise ValueError(f"noise_hold={self.noise_hold} must be >= 1 and divide rollout_steps={self.rollout_steps}")
-        if (self.num_envs * self.rollout_steps) % self.minibatches:
-            raise ValueError(f"num_envs·rollout_steps = {self.num_envs * self.rollout_steps} must be divisible by "
-                             f"minibatches = {self.minibatches}")
-        beta_max, gamma = self.smoothing
-        if not (0.0 <= beta_max < 1.0 and gamma >= 0.0):
-            raise ValueError(f"smoothing = (beta_max, gamma) needs beta_max in [0, 1) and gamma >= 0, "
-                             f"got {self.smoothing!r}")
-        if not (0.0 < self.gamma <= 1.0 and 0.0 <= self.gae_lambda <= 1.0):
-            raise ValueError(f"gamma must be in (0, 1] and gae_lambda in [0, 1], got {self.gamma}, {self.gae_lambda}")
-
-    @property
-    def frames_per_batch(self) -> int:
-        """Frames per collector batch (B · rollout_steps)."""
-        return self.num_envs * self.rollout_steps
-
-    def weights(self) -> RewardWeights:
-        """The reward weights of this run (standard v0 unless ``accuracy_only`` / overrides)."""
-        extra = dict(self.reward_weights)
-        if self.accuracy_only:
-            extra.update(delay=0.0, energy=0.0, jitter=0.0)
-        return RewardWeights(**extra)
 
 
 # --------------------------------------------------------------------------- boilerplate
@@ -245,7 +134,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
             ``MappoPolicy`` snapshot every ``cfg.eval_every`` frames and at the end;
             returns metrics logged under ``eval/``.
         check_seeds: optional guard called with every episode seed before it is used
-            (e.g. ``swarmloc.bench.suites.check_training_seeds``).
+            (e.g. ``swarmloc.bench.evaluation.suites.check_training_seeds``).
         writer: optional TensorBoard ``SummaryWriter`` (default: one in ``cfg.run_dir``).
 
     Returns:

@@ -17,7 +17,7 @@ from swarmloc.envs.observation import INNOVATION, N_FEATURES, SCALE_INNOVATION, 
 from .mappo_policy import ChannelActor
 
 if TYPE_CHECKING:
-    from .mappo import MappoConfig
+    from .mappo_config import MappoConfig
 
 G = "uav"  # the env's agent group
 

@@ -33,15 +33,12 @@ from swarmloc.envs.channels import N_KINDS, ChannelLayout
 from swarmloc.envs.observation import INNOVATION, KIND0, N_FEATURES, NIS, VALID
 
 from .protocols import TrustInput
-from .smoothing import MarkovSmoothing
+from .registry import WEIGHTS_DIR  # noqa: F401  (re-exported)
+from .smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing  # noqa: F401  (re-exported)
 
-#: folder of the shipped weights (``mappo.pt`` + ``mappo.json``, ...)
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 #: the logit is soft-limited to ±LOGIT_LIMIT, so α ∈ [3.4e-4, 0.99966]: below α_th (0.05)
 #: the CEKF skips the channel; near 1 it is the nominal R0
 LOGIT_LIMIT = 8.0
-#: madrl §2.3.3 smoothing parameters
-BETA_MAX, SMOOTHING_GAMMA = 0.85, 2.0
 
 
 #: per-UAV context appended to every channel: masked means of these features over the UAV's

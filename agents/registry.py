@@ -34,6 +34,8 @@ from .smoothing import MarkovSmoothing
 
 Track = Literal["A", "B"]
 SMOOTH_SUFFIX = "+smooth"
+#: folder of the shipped weights (``mappo.pt``, ``pfnn.npz`` …, each with its provenance record)
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,8 @@ from swarmloc.envs.channels import ChannelLayout
 
 from .protocols import LinkTrustPolicy, PrivilegedInfo, TrustInput
 
+#: madrl §2.3.3 smoothing parameters: β_max and γ [1/m]
+BETA_MAX, SMOOTHING_GAMMA = 0.85, 2.0
 #: FLOPs of the smoother per channel: subtract, abs, scale, exp, two multiply-adds
 SMOOTHING_FLOPS_PER_CHANNEL = 6.0
 

@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .cost import ProcessorProfile
+from .seeds import SEED_BOUND
 from .observation import N_FEATURES
 from .render import FirstEpisodeView
 from .reward import RewardWeights
@@ -27,7 +28,6 @@ from .trust_env import (
     build_spec,
 )
 
-_SEED_BOUND = 2**63 - 1
 
 
 class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -99,11 +99,11 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         super().reset(seed=seed)
         if seed is not None:
-            if not 0 <= seed < _SEED_BOUND:
+            if not 0 <= seed < SEED_BOUND:
                 raise ValueError(f"seed must be in [0, 2**63 - 1), got {seed}")
             episode_seed = int(seed)
         else:
-            episode_seed = int(self.np_random.integers(0, _SEED_BOUND))
+            episode_seed = int(self.np_random.integers(0, SEED_BOUND))
         self._batch.reset(np.array([episode_seed], dtype=np.int64))
         self._started = True
         if self.render_mode == "human":

@@ -17,6 +17,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from .cost import ProcessorProfile
+from .seeds import SEED_BOUND
 from .observation import N_FEATURES
 from .render import FirstEpisodeView
 from .reward import RewardWeights
@@ -29,7 +30,6 @@ from .trust_env import (
     build_spec,
 )
 
-_SEED_BOUND = 2**63 - 1
 
 
 class SwarmLocParallelEnv(ParallelEnv):
@@ -94,14 +94,14 @@ class SwarmLocParallelEnv(ParallelEnv):
               ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
         """Start an episode: ``seed=s`` plays episode seed ``s``; otherwise the next seed is drawn."""
         if seed is not None:
-            if not 0 <= int(seed) < _SEED_BOUND:
+            if not 0 <= int(seed) < SEED_BOUND:
                 raise ValueError(f"seed must be in [0, 2**63 - 1), got {seed}")
             self._np_random, _ = seeding.np_random(int(seed))
             episode_seed = int(seed)
         else:
             if self._np_random is None:
                 self._np_random, _ = seeding.np_random()
-            episode_seed = int(self._np_random.integers(0, _SEED_BOUND))
+            episode_seed = int(self._np_random.integers(0, SEED_BOUND))
         self._batch.reset(np.array([episode_seed], dtype=np.int64))
         self.agents = list(self.possible_agents)
         self._obs = self._batch.observation()

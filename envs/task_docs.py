@@ -133,7 +133,7 @@ def _measurement_model(spec: TaskSpec) -> str:
     if spec.scoring.align_first_seconds > 0:
         lines.append(f"- Scoring: errors after the yaw + 3-D translation that aligns the estimates of "
                      f"{spec.scoring.start:g}–{spec.scoring.start + spec.scoring.align_first_seconds:g} s with the "
-                     "truth (absolute translation and yaw are unobservable; `swarmloc.bench.alignment`).")
+                     "truth (absolute translation and yaw are unobservable; `swarmloc.bench.evaluation.alignment`).")
     lines += [f"- Sensors, `{name}`: {value}." for name, value in _other_fields(s, _DESCRIBED_SENSORS)]
     fl = spec.filter
     lines.append(f"- Filter: one 6-state CEKF per UAV; a channel joins the joint update when α > α_th = "

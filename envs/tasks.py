@@ -239,6 +239,27 @@ CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
 }
 
 
+class UnknownTaskError(KeyError, ValueError):
+    """An unknown task ID (both a ``KeyError`` — a failed catalogue look-up — and a ``ValueError`` — a bad argument)."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+def canonical_task_id(task_id: str) -> str:
+    """The registered ID of ``task_id`` (the ``swarmloc/`` prefix may be omitted).
+
+    Raises:
+        UnknownTaskError: not a registered task (the message lists the known ones).
+    """
+    if not isinstance(task_id, str):
+        raise UnknownTaskError(f"a task ID must be a string such as 'swarmloc/NLOS-v0', got {task_id!r}")
+    key = task_id if task_id.startswith("swarmloc/") else f"swarmloc/{task_id}"
+    if key not in CATALOGUE:
+        raise UnknownTaskError(f"unknown task ID {task_id!r}; known: {', '.join(sorted(CATALOGUE))}")
+    return key
+
+
 def get_spec(task_id: str, **overrides) -> TaskSpec:
     """The spec of a registered task, with optional validated field overrides.
 
@@ -248,13 +269,10 @@ def get_spec(task_id: str, **overrides) -> TaskSpec:
             (e.g. ``sensors={"imu_sigma": 0.0}``). Validated like the spec itself.
 
     Raises:
-        KeyError: unknown task ID (the message lists the known ones).
+        UnknownTaskError: unknown task ID (the message lists the known ones).
         pydantic.ValidationError: an override is unknown or out of range.
     """
-    key = task_id if task_id.startswith("swarmloc/") else f"swarmloc/{task_id}"
-    if key not in CATALOGUE:
-        raise KeyError(f"unknown task ID {task_id!r}; known: {', '.join(sorted(CATALOGUE))}")
-    spec = CATALOGUE[key]()
+    spec = CATALOGUE[canonical_task_id(task_id)]()
     if not overrides:
         return spec
     return TaskSpec.model_validate(_merge(spec.model_dump(), overrides))

@@ -166,9 +166,9 @@ class _CallableModule(types.ModuleType):
 
     def __call__(self, task_id: str, batch_size: int, device: str | torch.device = "cpu",
                  **kwargs: Any) -> SwarmLocTorchRLEnv:
-        from . import _known
+        from .tasks import canonical_task_id
 
-        return make_torchrl_env(_known(task_id), batch_size, device, **kwargs)
+        return make_torchrl_env(canonical_task_id(task_id), batch_size, device, **kwargs)
 
 
 sys.modules[__name__].__class__ = _CallableModule

@@ -24,7 +24,8 @@ from .cost import DEFAULT_PROFILE, ProcessorProfile
 from .observation import N_FEATURES, build_observation, kind_one_hot
 from .reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward
 from .specs import TaskSpec
-from .tasks import CATALOGUE, get_spec
+from .seeds import SEED_BOUND
+from .tasks import canonical_task_id, get_spec
 
 #: reward terms reported per UAV in every adapter's info (names of ``RewardTerms`` fields)
 REWARD_TERMS = ("accuracy", "delay_penalty", "energy_penalty", "jitter_penalty", "flops", "delay_ms", "energy_j")
@@ -32,8 +33,6 @@ REWARD_TERMS = ("accuracy", "delay_penalty", "energy_penalty", "jitter_penalty",
 INFO_KEYS = ("uav_reward",) + REWARD_TERMS + ("position_error",)
 #: spec fields a task's identity is made of; overriding them would make another task
 _IDENTITY_FIELDS = ("name", "version")
-#: exclusive upper bound of the core's episode seeds
-_SEED_BOUND = 2**63 - 1
 
 
 def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
@@ -44,13 +43,11 @@ def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
         overrides: TaskSpec fields to replace (e.g. ``duration=5.0``).
 
     Raises:
-        ValueError: unknown task ID (the message lists the known ones).
+        UnknownTaskError: unknown task ID (the message lists the known ones).
         TypeError: an override is not a TaskSpec field (the message lists the allowed ones).
         pydantic.ValidationError: an override value is out of range.
     """
-    key = task_id if task_id.startswith("swarmloc/") else f"swarmloc/{task_id}"
-    if key not in CATALOGUE:
-        raise ValueError(f"unknown task ID {task_id!r}; known: {', '.join(CATALOGUE)}")
+    canonical_task_id(task_id)
     allowed = sorted(set(TaskSpec.model_fields) - set(_IDENTITY_FIELDS))
     unknown = sorted(set(overrides) - set(allowed))
     if unknown:
@@ -164,7 +161,7 @@ class EpisodeSeeder:
         for b, s in enumerate(seeds):
             if s is None or (mask is not None and not mask[b]):
                 continue
-            if not isinstance(s, (int, np.integer)) or not 0 <= int(s) < _SEED_BOUND:
+            if not isinstance(s, (int, np.integer)) or not 0 <= int(s) < SEED_BOUND:
                 raise ValueError(f"seed for environment {b} must be an integer in [0, 2**63 - 1), got {s!r}")
             self._rngs[b], _ = seeding.np_random(int(s))
             self._pending[b] = int(s)
@@ -179,7 +176,7 @@ class EpisodeSeeder:
                 continue
             if self._rngs[b] is None:
                 self._rngs[b], _ = seeding.np_random()
-            out[b] = self._rngs[b].integers(0, _SEED_BOUND)
+            out[b] = self._rngs[b].integers(0, SEED_BOUND)
         return out
 
 

@@ -17,7 +17,7 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import quote
 
-from swarmloc.bench.results import METRIC_NAMES
+from swarmloc.bench.evaluation.results import METRIC_NAMES
 from swarmloc.leaderboard.ranking import (
     SuiteKey,
     by_suite,
@@ -154,9 +154,9 @@ def _definition_rows(rows: Iterable[tuple[str, str]]) -> str:
 
 
 def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | None]:
-    """Call ``swarmloc.bench.plots.plot_results`` if it exists; (images, error note)."""
+    """Call ``swarmloc.bench.evaluation.plots.plot_results`` if it exists; (images, error note)."""
     try:
-        from swarmloc.bench.plots import plot_results  # type: ignore[import-not-found]
+        from swarmloc.bench.evaluation.plots import plot_results  # type: ignore[import-not-found]
     except ImportError:
         return [], None
     plots_dir.mkdir(parents=True, exist_ok=True)
@@ -261,7 +261,7 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     Layout: ``index.html`` (one section per suite: ranked table, privileged table),
     ``methods/<id>.html`` (metadata, provenance, per-task table, plots),
     ``results/<id>.json`` (the submitted results files, for download),
-    ``plots/<id>/`` (images from ``swarmloc.bench.plots.plot_results`` when available)
+    ``plots/<id>/`` (images from ``swarmloc.bench.evaluation.plots.plot_results`` when available)
     and ``static/`` (CSS and the vanilla-JS table sorter). No external resources.
 
     Args:

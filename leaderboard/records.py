@@ -25,7 +25,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
-from swarmloc.bench.results import Aggregate
+from swarmloc.bench.evaluation.results import Aggregate
 
 
 class Base(DeclarativeBase):

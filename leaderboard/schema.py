@@ -1,6 +1,6 @@
 """What a leaderboard submission is, and the checks it must pass before verification.
 
-A submission is a results file (see :mod:`swarmloc.bench.results`), the method's entry
+A submission is a results file (see :mod:`swarmloc.bench.evaluation.results`), the method's entry
 point, an optional weights file, and metadata. :func:`validate_submission` checks, in
 order and without running any submitted code:
 
@@ -32,8 +32,8 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from swarmloc.bench.results import METRIC_NAMES, Results, ResultsFileError, parse_results
-from swarmloc.bench.stats import aggregate
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results
+from swarmloc.bench.evaluation.stats import aggregate
 from swarmloc.leaderboard.entry_points import (
     EntryPoint,
     locate_source,
@@ -186,7 +186,7 @@ class SizeLimits:
 
 
 class SuiteLike(Protocol):
-    """What ``swarmloc.bench.suites.get_suite(name)`` returns."""
+    """What ``swarmloc.bench.evaluation.suites.get_suite(name)`` returns."""
 
     name: str
     version: str
@@ -221,12 +221,12 @@ class ValidatedSubmission:
 
 
 def default_suite_lookup(name: str) -> SuiteLike:
-    """Look a suite up in ``swarmloc.bench.suites`` (imported lazily)."""
+    """Look a suite up in ``swarmloc.bench.evaluation.suites`` (imported lazily)."""
     try:
-        from swarmloc.bench.suites import get_suite
+        from swarmloc.bench.evaluation.suites import get_suite
     except ImportError as err:
         raise InvalidSubmission(
-            f"cannot look up suite {name!r}: swarmloc.bench.suites.get_suite is not "
+            f"cannot look up suite {name!r}: swarmloc.bench.evaluation.suites.get_suite is not "
             f"available ({err})"
         ) from None
     return get_suite(name)
@@ -352,7 +352,7 @@ def validate_submission(
 
     Args:
         submission: The submission.
-        suite_lookup: ``name -> suite`` (default: ``swarmloc.bench.suites.get_suite``).
+        suite_lookup: ``name -> suite`` (default: ``swarmloc.bench.evaluation.suites.get_suite``).
         limits: File size limits.
 
     Returns:

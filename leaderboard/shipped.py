@@ -15,7 +15,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarmloc.bench.results import load_results
+from swarmloc.bench.evaluation.results import load_results
 from swarmloc.leaderboard.errors import DuplicateSubmission
 from swarmloc.leaderboard.store import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 from swarmloc.leaderboard.submit import submit

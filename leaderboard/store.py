@@ -35,7 +35,7 @@ from sqlalchemy.engine import Connection, Engine, make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session
 
-from swarmloc.bench.results import Aggregate
+from swarmloc.bench.evaluation.results import Aggregate
 from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError
 from swarmloc.leaderboard.records import (
     Base,

@@ -13,7 +13,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from swarmloc.bench.stats import aggregate, aggregate_across_tasks
+from swarmloc.bench.evaluation.stats import aggregate, aggregate_across_tasks
 from swarmloc.leaderboard.errors import InvalidSubmission
 from swarmloc.leaderboard.schema import (
     SizeLimits,
@@ -159,7 +159,7 @@ def submit(
         search_path: Directories the method's modules are imported from.
         runner: ``module:function`` the verification worker calls.
         runner_path: Extra directories for the worker's ``PYTHONPATH`` (runner code).
-        suite_lookup: ``name -> suite`` (default ``swarmloc.bench.suites.get_suite``).
+        suite_lookup: ``name -> suite`` (default ``swarmloc.bench.evaluation.suites.get_suite``).
         store: An open store (overrides ``db_url``).
 
     Returns:

@@ -32,11 +32,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmloc.bench.results import METRIC_NAMES, Results
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
 from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import VerificationFailed
 
-DEFAULT_RUNNER: str = "swarmloc.bench.runner:run_episodes"
+DEFAULT_RUNNER: str = "swarmloc.bench.evaluation.runner:run_episodes"
 """``module:function`` the worker calls as ``run_episodes(method, episodes) -> list[dict]``."""
 
 WORKER_MODULE: str = "swarmloc.leaderboard.verify_worker"

@@ -16,13 +16,15 @@ import csv
 import io
 import json
 import sys
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 from typing import Any, Literal
 
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from swarmloc.leaderboard.errors import StoreError
 from swarmloc.leaderboard.html_site import render_html
 from swarmloc.leaderboard.ranking import (
     by_suite,
@@ -40,6 +42,24 @@ ExportFormat = Literal["csv", "json"]
 
 
 # -- terminal ------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def open_store_or_refuse(db_url: str | None, console: Console | None = None) -> Iterator[LeaderboardStore | None]:
+    """The store at ``db_url`` (closed on exit), or None after printing why it cannot be opened.
+
+    Args:
+        db_url: store URL (None: ``$SWARMLOC_DB`` or the default SQLite file).
+        console: where the refusal is printed (default: standard output).
+    """
+    try:
+        store = LeaderboardStore(db_url)
+    except StoreError as err:
+        (console or Console()).print(Text(f"cannot open the leaderboard: {err}", style="bold red"))
+        yield None
+        return
+    with store:
+        yield store
 
 
 def _rich_table(title: str, entries: Sequence[LeaderboardEntry], tasks: Sequence[str],

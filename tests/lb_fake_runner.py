@@ -1,4 +1,4 @@
-"""A stand-in for ``swarmloc.bench.runner.run_episodes`` used by the leaderboard tests.
+"""A stand-in for ``swarmloc.bench.evaluation.runner.run_episodes`` used by the leaderboard tests.
 
 Standard library only (it runs inside the verification worker). Metrics are a pure
 function of (task, seed). The method's factory name selects a behaviour:

@@ -10,7 +10,7 @@ from typing import Any
 
 import lb_fake_runner
 
-from swarmloc.bench.results import (
+from swarmloc.bench.evaluation.results import (
     EpisodeMetrics,
     MethodInfo,
     SuiteInfo,
@@ -30,7 +30,7 @@ TEST_LIMITS = VerifyLimits(wall_time_s=20.0, memory_bytes=512 * 1024**2)
 
 @dataclass(frozen=True)
 class FakeSuite:
-    """Satisfies the ``swarmloc.bench.suites.get_suite`` contract."""
+    """Satisfies the ``swarmloc.bench.evaluation.suites.get_suite`` contract."""
 
     name: str
     version: str

@@ -9,8 +9,8 @@ from pydantic import ValidationError
 from swarmloc.agents.init.initializer import InitConfig, MdsMapInitializer, refine_with_odometry
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.agents.registry import load_method
-from swarmloc.bench.alignment import align_estimates, yaw_translation_fit
-from swarmloc.bench.runner import _Recorder, rollout
+from swarmloc.bench.evaluation.alignment import align_estimates, yaw_translation_fit
+from swarmloc.bench.evaluation.runner import _Recorder, rollout
 from swarmloc.envs.channels import PEER
 from swarmloc.envs.tasks import CATALOGUE, get_spec
 from swarmloc.envs.world import World

@@ -16,7 +16,7 @@ from swarmloc.agents.classical import (
 from swarmloc.agents.protocols import PrivilegedInfo, TrustInput, episode_keys
 from swarmloc.agents.registry import load_method
 from swarmloc.agents.smoothing import MarkovSmoothing, smooth_step
-from swarmloc.bench.runner import evaluate_task, rollout
+from swarmloc.bench.evaluation.runner import evaluate_task, rollout
 from swarmloc.envs.channels import ANCHOR, GPS, ChannelLayout
 from swarmloc.envs.tasks import get_spec
 

@@ -10,7 +10,7 @@ import pytest
 
 from swarmloc.agents.ci_ekf import CiEkfConfig, CiEkfEstimator, ci_ekf, ci_ekf_no_aa, range_update, velocity_update
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
-from swarmloc.bench.alignment import align_estimates
+from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 

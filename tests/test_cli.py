@@ -2,20 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from rich.console import Console
 
 from swarmloc.bench import cli
-from swarmloc.bench.demo import run_demo
-from swarmloc.bench.results import load_results
-from swarmloc.bench.runner import run_episodes
-from swarmloc.bench.suites import Suite
+from swarmloc.bench.evaluation.demo import run_demo
+from swarmloc.bench.evaluation.results import load_results
+from swarmloc.bench.evaluation.runner import run_episodes
+from swarmloc.bench.evaluation.suites import Suite
 
 SWARMLOC = Path(sys.executable).parent / "swarmloc"
 
@@ -61,29 +61,58 @@ def test_tasks_and_methods_commands(capsys):
     assert "chi2-soft" in capsys.readouterr().out
 
 
-@dataclass
-class _Hello:
-    """Say hello."""
+def test_a_module_can_add_a_subcommand(monkeypatch, capsys):
+    # a command is a module with `Options` and `run`; tests/cli_hello_command.py is one
+    monkeypatch.setitem(cli.COMMANDS, "hello-test", "cli_hello_command")
+    assert cli.main(["hello-test", "--times", "4"]) == 3
+    assert capsys.readouterr().out == "hello\n" * 4
 
-    times: int = 1
-    """How many times."""
+
+def test_a_module_off_the_convention_is_refused(monkeypatch):
+    monkeypatch.setitem(cli.COMMANDS, "broken", "lb_helpers")  # a module without Options / run
+    with pytest.raises(TypeError, match="must define a dataclass `Options` and a function `run"):
+        cli.main(["--help"])
 
 
-def test_a_module_can_add_a_subcommand(capsys):
-    seen = []
+def _leaves(table, prefix=()):
+    for name, entry in table.items():
+        if isinstance(entry, str):
+            yield prefix + (name,), entry
+        else:
+            yield from _leaves(entry, prefix + (name,))
 
-    @cli.command("hello-test", help="test command")
-    def run_hello(cfg: _Hello) -> int:
-        seen.append(cfg.times)
-        return 3
 
-    try:
-        assert cli.main(["hello-test", "--times", "4"]) == 3
-        assert seen == [4]
-        with pytest.raises(ValueError, match="already registered"):
-            cli.register_command("hello-test", _Hello, lambda cfg: 0)
-    finally:
-        cli.COMMANDS.pop("hello-test")
+@pytest.mark.parametrize("path,module", list(_leaves(cli.COMMANDS)), ids=lambda v: " ".join(v) if isinstance(v, tuple) else "")
+def test_every_command_parses_its_help(path, module, capsys):
+    """Each leaf follows the convention and answers ``--help`` through the nested parser (no issue numbers)."""
+    loaded = cli.load_command(module)
+    assert loaded.Options.__doc__, f"{module}.Options needs a docstring (its help line)"
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main([*path, "--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    assert "usage: swarmloc " + " ".join(path) in " ".join(text.split())
+    assert "issue" not in text.lower()
+
+
+def test_help_and_tasks_import_neither_torch_nor_numba():
+    """``swarmloc --help`` and ``swarmloc tasks`` stay light: the heavy modules load only inside handlers."""
+    probe = ("import sys\nfrom swarmloc.bench.cli import main\n"
+             "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+             "print('HEAVY', sorted(m for m in ('torch', 'numba', 'torchrl', 'tensordict') if m in sys.modules))")
+    for args in (["--help"], ["tasks"], ["bench", "speed", "--help"], ["train", "mappo", "--help"]):
+        proc = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout.strip().splitlines()[-1] == "HEAVY []", (args, proc.stdout[-300:])
+
+
+def test_bench_speed_writes_json(tmp_path):
+    out = tmp_path / "speed.json"
+    assert cli.main(["bench", "speed", "--quick", "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    impls = {r["impl"] for r in rows}
+    assert {"filterpy", "reference", "kernel", "world"} <= impls
+    assert all(r["env_steps_per_s"] > 0 for r in rows)
 
 
 def test_demo_tables(tmp_path):

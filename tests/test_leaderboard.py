@@ -1,6 +1,6 @@
 """Leaderboard: validation, sandboxed verification, the store, and the views.
 
-A tiny suite (2 tasks × 3 seeds) is injected instead of ``swarmloc.bench.suites``, and
+A tiny suite (2 tasks × 3 seeds) is injected instead of ``swarmloc.bench.evaluation.suites``, and
 verification calls ``tests/lb_fake_runner.py`` instead of the real runner.
 """
 
@@ -24,14 +24,7 @@ from sqlalchemy.orm import Session
 
 from swarmloc.leaderboard import store as store_module
 from swarmloc.leaderboard import views
-from swarmloc.leaderboard.cli_commands import (
-    LeaderboardExport,
-    LeaderboardHtml,
-    LeaderboardShow,
-    SubmitCommand,
-    run_leaderboard,
-    run_submit,
-)
+from swarmloc.bench.cli import leaderboard_export, leaderboard_html, leaderboard_show, submit as submit_command
 from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import (
     DuplicateSubmission,
@@ -250,8 +243,8 @@ def test_bad_metadata_is_rejected(meta: dict, message: str, db_url: str, tmp_pat
 
 
 def test_default_lookup_uses_the_bench_suite_registry(tmp_path: Path) -> None:
-    suites = pytest.importorskip("swarmloc.bench.suites")
-    from swarmloc.bench.results import load_results, write_results
+    suites = pytest.importorskip("swarmloc.bench.evaluation.suites")
+    from swarmloc.bench.evaluation.results import load_results, write_results
     from swarmloc.leaderboard.schema import make_submission, validate_submission
 
     quick = suites.get_suite("quick")
@@ -262,7 +255,7 @@ def test_default_lookup_uses_the_bench_suite_registry(tmp_path: Path) -> None:
                                               "sha256": quick.sha256})
     write_results(path, raw.model_copy(update={"suite": suite_info}))
     submission = make_submission(path, "lb_fake_runner:good_quick", {"name": "q", "track": "A"})
-    validated = validate_submission(submission)  # default lookup: swarmloc.bench.suites
+    validated = validate_submission(submission)  # default lookup: swarmloc.bench.evaluation.suites
     assert validated.suite.name == "quick" and len(validated.results.episodes) == len(quick.episodes)
 
 
@@ -503,7 +496,7 @@ def test_schema_is_portable_to_postgresql() -> None:
 
 
 def test_script_in_name_is_escaped_in_html(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "swarmloc.bench.plots", None)  # no plot function yet
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.evaluation.plots", None)  # no plot function yet
     evil = '<script>alert("x")</script>'
     path = H.make_results_file(tmp_path / "x.json", "lb_fake_runner:good_xss")
     receipt = _submit(path, "lb_fake_runner:good_xss", db_url, {
@@ -535,7 +528,7 @@ def test_method_page_embeds_plots_when_bench_provides_them(
         target.write_bytes(b"\x89PNG\r\n\x1a\n")
         return [target]
 
-    monkeypatch.setitem(sys.modules, "swarmloc.bench.plots",
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.evaluation.plots",
                         types.SimpleNamespace(plot_results=plot_results))
     site = tmp_path / "site"
     views.render_html(LeaderboardStore(db_url), site)
@@ -573,12 +566,12 @@ def test_terminal_view_and_exports(db_url: str, tmp_path: Path) -> None:
 
 def test_cli_commands(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     console = Console(record=True, width=250, file=io.StringIO())
-    assert run_leaderboard(LeaderboardShow(db_url=db_url), console) == 0
+    assert leaderboard_show.run(leaderboard_show.Options(db_url=db_url), console) == 0
     assert "seed method" in console.export_text()
-    assert run_leaderboard(LeaderboardHtml(out=tmp_path / "site", db_url=db_url), console) == 0
+    assert leaderboard_html.run(leaderboard_html.Options(out=tmp_path / "site", db_url=db_url), console) == 0
     assert (tmp_path / "site" / "index.html").is_file()
-    assert run_leaderboard(LeaderboardExport(format="json", db_url=db_url), console) == 0
+    assert leaderboard_export.run(leaderboard_export.Options(format="json", db_url=db_url), console) == 0
     assert json.loads(capsys.readouterr().out)[0]["name"] == "seed method"
-    refused = run_submit(SubmitCommand(results=tmp_path / "missing.json", entry_point="pkg.mod:make",
-                                       name="x", track="A", db_url=db_url), console)
+    refused = submit_command.run(submit_command.Options(results=tmp_path / "missing.json", entry_point="pkg.mod:make",
+                                                        name="x", track="A", db_url=db_url), console)
     assert refused == 1 and "missing.json does not exist" in console.export_text()

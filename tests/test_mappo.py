@@ -50,9 +50,9 @@ def _tiny_config(tmp_path: Path, **kw):
 
 
 def test_train_cli_smoke(tmp_path):
-    """``python -m swarmloc.bench.train_cli`` trains a few hundred frames and writes weights, provenance and logs."""
+    """``python -m swarmloc.bench.training.mappo`` trains a few hundred frames and writes weights, provenance and logs."""
     out = tmp_path / "w" / "mappo.pt"
-    cmd = [sys.executable, "-m", "swarmloc.bench.train_cli", "--frames", "400", "--tasks", "CascadedFault-v0",
+    cmd = [sys.executable, "-m", "swarmloc.bench.training.mappo", "--frames", "400", "--tasks", "CascadedFault-v0",
            "Scale2-v0", "--num-envs", "2", "--rollout-steps", "100", "--epochs", "1", "--minibatches", "2",
            "--eval-seeds", "1", "--run-dir", str(tmp_path / "run"), "--weights-out", str(out), "--no-progress"]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=240)
@@ -97,7 +97,7 @@ def test_policy_any_swarm_size_and_channel_count(n, n_l, context):
 def test_policy_runs_on_tasks_of_different_shapes():
     """The same weights run through the runner on Scale2 and Scale8 (short episodes)."""
     from swarmloc.agents.registry import LoadedMethod
-    from swarmloc.bench.runner import rollout
+    from swarmloc.bench.evaluation.runner import rollout
     from swarmloc.envs.tasks import get_spec
 
     torch.manual_seed(0)
@@ -166,7 +166,7 @@ def test_weights_round_trip_keeps_the_input_layout(tmp_path):
 def test_shipped_weights_load_and_give_trust_in_unit_interval():
     """``mappo`` and its ablations load without training and output α in (0, 1] on a real task."""
     from swarmloc.agents.registry import get_entry
-    from swarmloc.bench.runner import rollout
+    from swarmloc.bench.evaluation.runner import rollout
     from swarmloc.envs.tasks import get_spec
 
     meta = json.loads(SHIPPED.with_suffix(".json").read_text())
@@ -205,8 +205,8 @@ def test_missing_weights_give_a_clear_error(tmp_path):
 
 def test_training_refuses_test_and_dev_seeds(tmp_path):
     from swarmloc.agents.mappo import EpisodeSeeds, train
-    from swarmloc.bench.suites import check_training_seeds
-    from swarmloc.bench.train_cli import TrainMappoArgs, train_mappo
+    from swarmloc.bench.evaluation.suites import check_training_seeds
+    from swarmloc.bench.training.mappo import TrainMappoArgs, train_mappo
 
     for seed in (1_000_000, 1_000_031, 2_000_003):
         with pytest.raises(ValueError, match="training seed"):
@@ -233,7 +233,7 @@ def test_training_is_deterministic_given_a_seed(tmp_path):
 
 
 def test_reproduce_madrl_checks_its_arguments(tmp_path):
-    from swarmloc.bench.reproduce_madrl import reproduce_madrl
+    from swarmloc.bench.reproduce.madrl import reproduce_madrl
 
     with pytest.raises(ValueError, match="seeds must be in"):
         reproduce_madrl(tmp_path, seeds=0)
@@ -244,10 +244,9 @@ def test_reproduce_madrl_checks_its_arguments(tmp_path):
 
 
 def test_cli_registers_train_mappo_and_reproduce_madrl():
-    from swarmloc.bench import mappo_cli  # noqa: F401  (registers the subcommands)
-    from swarmloc.bench.cli_commands import GROUPS
+    from swarmloc.bench.cli import COMMANDS
 
-    assert "mappo" in GROUPS["train"] and "madrl" in GROUPS["reproduce"]
+    assert "mappo" in COMMANDS["train"] and "madrl" in COMMANDS["reproduce"]
 
 
 def test_loop_smoother_equals_execution_smoothing():

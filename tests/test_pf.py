@@ -275,7 +275,7 @@ def test_network_output_and_correction_range():
 
 
 def test_training_refuses_test_and_dev_seeds(tmp_path):
-    from swarmloc.bench.train_pfnn import TrainPfnnArgs, train_pfnn
+    from swarmloc.bench.training.pfnn import TrainPfnnArgs, train_pfnn
 
     for start in (1_000_000, 2_000_000):
         with pytest.raises(ValueError, match="training seeds must be in"):
@@ -284,7 +284,7 @@ def test_training_refuses_test_and_dev_seeds(tmp_path):
 
 
 def test_fit_writes_weights_with_provenance(tmp_path):
-    from swarmloc.bench.train_pfnn import TrainPfnnArgs, train_pfnn
+    from swarmloc.bench.training.pfnn import TrainPfnnArgs, train_pfnn
 
     out = tmp_path / "pfnn.npz"
     args = TrainPfnnArgs(seeds=2, seed_start=10, duration=2.0, rounds=1, epochs=1, weights_out=out)
@@ -336,7 +336,7 @@ def test_online_oracle_is_privileged_and_learns_from_truth(short):
 
 
 def test_speed_rows_have_the_contract():
-    from swarmloc.bench import speed_estimators as se
+    from swarmloc.bench.speed import estimators as se
 
     rec = se.record(1, 4)
     t, particles = se.time_estimator(lambda: ParticleFilter(STANDARD), rec, 1)
@@ -346,7 +346,7 @@ def test_speed_rows_have_the_contract():
 
 
 def test_reproduce_smoke(tmp_path):
-    from swarmloc.bench.reproduce_pfnn import reproduce_pfnn
+    from swarmloc.bench.reproduce.pfnn import reproduce_pfnn
 
     path = reproduce_pfnn(tmp_path, seeds=2, duration=1.0, timing_steps=3)
     text = path.read_text()

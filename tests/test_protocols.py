@@ -20,7 +20,7 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import REGISTRY, LoadedMethod, load_method, method_names
 from swarmloc.agents.trust_estimator import TrustEstimator
-from swarmloc.bench.runner import rollout
+from swarmloc.bench.evaluation.runner import rollout
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 

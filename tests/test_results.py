@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from swarmloc.bench import results as R
+from swarmloc.bench.evaluation import results as R
 
 
 def _results(n_seeds: int = 3) -> R.Results:
@@ -148,7 +148,7 @@ def test_results_module_stays_light() -> None:
     import sys
 
     code = (
-        "import sys, swarmloc.bench.results as r; "
+        "import sys, swarmloc.bench.evaluation.results as r; "
         "r.collect_provenance(); "
         "print(sorted(m for m in ('torch', 'numpy', 'numba', 'swarmloc.leaderboard') if m in sys.modules))"
     )

@@ -8,8 +8,8 @@ import pytest
 from swarmloc.agents.dead_reckoning import DeadReckoning
 from swarmloc.agents.protocols import EstimatorOutput, Measurements
 from swarmloc.agents.registry import LoadedMethod, load_method
-from swarmloc.bench.results import METRIC_NAMES, load_results
-from swarmloc.bench.runner import (
+from swarmloc.bench.evaluation.results import METRIC_NAMES, load_results
+from swarmloc.bench.evaluation.runner import (
     evaluate,
     evaluate_methods,
     evaluate_task,
@@ -18,7 +18,7 @@ from swarmloc.bench.runner import (
     run_episodes,
     traces_path,
 )
-from swarmloc.bench.suites import Suite
+from swarmloc.bench.evaluation.suites import Suite
 from swarmloc.envs.tasks import get_spec
 
 EPISODES = [("swarmloc/NLOS-v0", 1_000_001), ("swarmloc/CascadedFaultRandom-v0", 1_000_002),
@@ -134,7 +134,7 @@ class _NeedsGps(DeadReckoning):
 
 
 def test_unsupported_task_gives_null_metrics(monkeypatch):
-    import swarmloc.bench.runner as runner
+    import swarmloc.bench.evaluation.runner as runner
 
     real_load = runner.load_method
     monkeypatch.setattr(runner, "load_method",

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from swarmloc.bench.results import load_results
-from swarmloc.bench.suites import get_suite
+from swarmloc.bench.evaluation.results import load_results
+from swarmloc.bench.evaluation.suites import get_suite
 from swarmloc.leaderboard.shipped import load_shipped, shipped_results
 from swarmloc.leaderboard.store import LeaderboardStore
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.bench import stats
-from swarmloc.bench.results import METRIC_NAMES, EpisodeMetrics
+from swarmloc.bench.evaluation import stats
+from swarmloc.bench.evaluation.results import METRIC_NAMES, EpisodeMetrics
 
 
 def test_bootstrap_ci_of_a_constant_is_that_constant() -> None:

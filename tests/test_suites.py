@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from swarmloc.bench.results import suite_sha256
-from swarmloc.bench.suites import (
+from swarmloc.bench.evaluation.results import suite_sha256
+from swarmloc.bench.evaluation.suites import (
     STANDARD_V0_TASKS,
     check_training_seeds,
     get_suite,

@@ -244,7 +244,7 @@ def test_gymnasium_env_runs_on_the_recording():
 @needs_data
 def test_accuracy_uniform_chi2_oracle_on_twr_obs_log1():
     """The acceptance numbers: uniform ≤ 0.35 m, chi2-gate ≤ uniform, oracle ≤ both (full flight)."""
-    runner = pytest.importorskip("swarmloc.bench.runner")
+    runner = pytest.importorskip("swarmloc.bench.evaluation.runner")
     from swarmloc.agents.registry import load_method
 
     seeds = [1_000_000, 1_000_001]

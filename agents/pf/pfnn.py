@@ -19,12 +19,14 @@ import numpy as np
 
 from swarmloc.envs.rng import Stream, normal_array
 
+from ..registry import WEIGHTS_DIR
+
 from .core import SLOT_NN_INIT, rng_index
 
 N_FEATURES = 6
 HIDDEN = 12
 #: where the shipped, offline-trained weights live
-WEIGHTS_PATH = Path(__file__).resolve().parent.parent / "weights" / "pfnn.npz"
+WEIGHTS_PATH = WEIGHTS_DIR / "pfnn.npz"
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 The same maths and the same random numbers as the numba kernel, written the obvious way:
 a Python loop over episodes and UAVs, numpy over particles, ``np.cumsum`` +
 ``np.searchsorted`` for systematic resampling. It is the oracle the kernel is tested
-against and the baseline of the speed ratio in ``bench/speed_estimators.py``.
+against and the baseline of the speed ratio in ``bench/speed/estimators.py``.
 
 The counter-based generator of ``envs.rng`` is re-expressed here with numpy ``uint64``
 arithmetic (SplitMix64 finaliser chained over the key), so whole particle sets draw their

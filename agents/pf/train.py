@@ -14,7 +14,7 @@ on training episodes, then frozen:
    rate over the pooled samples.
 
 Seed policy (which seeds training may use) is the caller's: ``swarmloc train pfnn``
-(``bench/train_pfnn.py``) refuses test and dev seeds before calling :func:`fit_pfnn`.
+(``bench/training/pfnn.py``) refuses test and dev seeds before calling :func:`fit_pfnn`.
 """
 
 from __future__ import annotations

@@ -1,0 +1,29 @@
+"""``swarmloc reproduce federated``: federated Tables 2–3 on GradualFault-v0."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Options:
+    """federated Tables 2–3 on GradualFault-v0 (Scheme 1, Scheme 2, the adaptive federated filter)."""
+
+    out: Path = Path("federated.md")
+    """Markdown file to write (a folder: <out>/federated.md); raw numbers go beside it as .json."""
+    seeds: int = 16
+    """Test seeds (1_000_000 …), at least 2."""
+
+
+def run(opts: Options) -> int:
+    """Write the report and print it."""
+    from swarmloc.bench.reproduce.federated import reproduce_federated
+
+    try:
+        path = reproduce_federated(opts.out, opts.seeds)
+    except ValueError as err:
+        print(f"error: {err}")
+        return 2
+    print(path.read_text())
+    return 0

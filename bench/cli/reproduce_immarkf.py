@@ -1,0 +1,31 @@
+"""``swarmloc reproduce immarkf``: imm-arkf Table 2 on HybridNoise{10,30,50}-v0."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Options:
+    """imm-arkf Table 2 on HybridNoise{10,30,50}-v0 (IMM-ARKF vs IMM-KF vs IMM-EKF), beside the paper's numbers."""
+
+    out: Path = Path("immarkf.md")
+    """Markdown file to write (a folder: <out>/immarkf.md); raw numbers go beside it as .json."""
+    seeds: int = 16
+    """Test seeds per task (1_000_000 …), at least 2."""
+    duration: float | None = None
+    """Episode length [s] (default: the tasks' 60 s)."""
+
+
+def run(opts: Options) -> int:
+    """Write the report and print it."""
+    from swarmloc.bench.reproduce.immarkf import reproduce_immarkf
+
+    try:
+        path = reproduce_immarkf(opts.out, opts.seeds, opts.duration)
+    except ValueError as err:
+        print(f"error: {err}")
+        return 2
+    print(path.read_text())
+    return 0

@@ -1,0 +1,35 @@
+"""``swarmloc reproduce pfnn``: pf-nn Tables 4 (accuracy) and 5 (time per step) on Indoor-v0."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Options:
+    """pf-nn Tables 4 (accuracy) and 5 (time per step) on Indoor-v0, beside the paper's numbers."""
+
+    out: Path = Path("pfnn.md")
+    """Markdown file to write (a folder: <out>/pfnn.md); raw numbers go beside it as .json."""
+    seeds: int = 32
+    """Indoor-v0 test seeds (1_000_000 …)."""
+    duration: float | None = None
+    """Episode length [s] (default: the task's 100 s)."""
+    timing_steps: int = 300
+    """Steps of the Table 5 timing episode."""
+    oracle: bool = True
+    """Also run the privileged online-trained PF-NN (shown apart)."""
+
+
+def run(opts: Options) -> int:
+    """Write the report and print it."""
+    from swarmloc.bench.reproduce.pfnn import reproduce_pfnn
+
+    try:
+        path = reproduce_pfnn(opts.out, opts.seeds, opts.duration, opts.timing_steps, opts.oracle)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"error: {err}")
+        return 2
+    print(path.read_text())
+    return 0

@@ -1,0 +1,88 @@
+"""``swarmloc submit``: validate a results file, re-run a sample of its episodes in the sandbox, store it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+
+@dataclass
+class Options:
+    """Validate a results file, re-run a sample of its episodes, and store it."""
+
+    results: Path
+    """Results file written by `swarmloc evaluate`."""
+    entry_point: str
+    """The method: `package.module:factory`, `path/to/file.py:factory` or a registered name."""
+    name: str
+    """Name shown on the leaderboard (at most 64 characters)."""
+    track: Literal["A", "B"]
+    """A: link trust inside the env's CEKF; B: full estimator."""
+    authors: str = ""
+    """Authors (at most 256 characters)."""
+    url: str | None = None
+    """Paper or code link (http:// or https://)."""
+    description: str = ""
+    """Short description (at most 2000 characters)."""
+    privileged: bool = False
+    """The method reads ground truth or fault labels (listed apart, not ranked)."""
+    weights: Path | None = None
+    """Weights file the method loads; its SHA-256 must match the results file."""
+    search_path: tuple[Path, ...] = ()
+    """Directories the method's modules are imported from."""
+    db_url: str | None = None
+    """Store URL (default: $SWARMLOC_DB, else a SQLite file in the user data directory)."""
+    trust: bool = False
+    """Skip verification; allowed only for the shipped reference methods."""
+    sample_frac: float = 0.1
+    """Fraction of episodes re-run for verification (at least `min_episodes`)."""
+    min_episodes: int = 3
+    """Minimum number of episodes re-run."""
+    seed: int | None = None
+    """Seed of the episode sampler (random when omitted; recorded in the store)."""
+    time_limit_s: float = 900.0
+    """Wall-time limit of the verification re-run, in seconds."""
+    memory_limit_mb: int = 8192
+    """Address-space limit of the verification worker, in MiB."""
+
+
+def run(opts: Options, console: Console | None = None) -> int:
+    """Submit; print the receipt or the reason for refusal.
+
+    Returns:
+        0 when stored, 1 when refused (nothing stored).
+    """
+    from rich.console import Console
+    from rich.text import Text
+
+    from swarmloc.leaderboard.errors import StoreError, SubmissionError
+    from swarmloc.leaderboard.submit import submit
+    from swarmloc.leaderboard.verify import VerifyLimits
+
+    out = console or Console()
+    try:
+        receipt = submit(
+            opts.results,
+            opts.entry_point,
+            {
+                "name": opts.name, "authors": opts.authors, "url": opts.url,
+                "description": opts.description, "track": opts.track, "privileged": opts.privileged,
+            },
+            weights=opts.weights,
+            db_url=opts.db_url,
+            trust=opts.trust,
+            sample_frac=opts.sample_frac,
+            min_episodes=opts.min_episodes,
+            sample_seed=opts.seed,
+            limits=VerifyLimits(wall_time_s=opts.time_limit_s, memory_bytes=opts.memory_limit_mb * 1024**2),
+            search_path=opts.search_path,
+        )
+    except (SubmissionError, StoreError, ValueError) as err:
+        out.print(Text(f"submission refused: {err}", style="bold red"))
+        return 1
+    out.print(Text(receipt.describe()))
+    return 0

@@ -1,0 +1,276 @@
+"""Per-episode metrics (DESIGN "Metrics"): small pure functions, one per metric.
+
+Every metric is computed on the task's *scored nodes* (``spec.scored_nodes``) and
+*scored interval* (steps with ``t ≥ spec.scoring.start``), from the position error
+e = ‖p̂ − p‖ [m] of every scored UAV at every filter update k = 1 … T (t = k·dt):
+
+| metric | definition |
+|---|---|
+| ``rmse`` | √mean(e²) |
+| ``mean_error`` / ``median_error`` / ``max_error`` | mean / median / max of e |
+| ``cep90`` | 90th percentile of the 3-D error (spherical error probable, 90 %) |
+| ``fault_rmse`` | RMSE inside ``scoring.fault_window``; if the task defines none, over the steps where any scored UAV has a labelled channel; null if there are none |
+| ``healthy_rmse`` | RMSE of the healthy nodes during the fault: ``scoring.healthy_nodes`` inside the fault window, or, for a randomised IMU cascade, the UAVs the episode's schedule leaves healthy inside its fault span; null where the task defines neither |
+| ``diverged`` | 1.0 if e > 10 m at any step, else 0.0 |
+| ``delay_ms`` | mean compute time per UAV-step [ms] on the processor profile (filter + method FLOPs); the schema has one field, so the mean |
+| ``energy_j`` | energy per UAV over the episode [J] (sum over steps, mean over UAVs) |
+| ``jitter`` | mean \\|α(k) − α(k−1)\\| over valid channel-steps (α(0) = 1) |
+| ``weight_var`` | variance of the applied α over valid channel-steps |
+| ``anomaly_detection_rate`` | fraction of labelled channel-steps whose applied α < 0.5 (the method at least halved its trust: R inflated ≥ 2×; α ≤ α_th, skipping the channel, is included); dtvirm Table 6 "detected / abnormal"; null without labels |
+| ``team_return`` | Σ over all steps of the team standard reward (mean over all UAVs) |
+| ``normalized_score`` | (RMSE_uniform − RMSE) / (RMSE_uniform − RMSE_oracle) on the same episode; null when the gap is below 1 mm (e.g. no fault labels: oracle = uniform) |
+
+On a task with ``scoring.align_first_seconds > 0`` (anchor-free: absolute translation and
+yaw are unobservable), e is measured after the yaw + translation that aligns the first
+seconds of the scored interval with the truth (``swarmloc.bench.evaluation.alignment``), applied to
+the whole episode.
+
+Trust metrics need the trust the method applied; for a Track B estimator that reports no
+``weights`` they are null. ``delay_ms``/``energy_j`` are null for an estimator that
+reports no FLOPs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmloc.bench.evaluation.stats import normalized_score as _normalized_score
+
+#: an error above this at any time marks the episode diverged [m]
+DIVERGENCE_M = 10.0
+#: a labelled channel-step counts as detected when its applied trust is below this
+DETECTION_TRUST = 0.5
+#: the normalized score is undefined (null) when RMSE_uniform − RMSE_oracle is below this [m]
+MIN_SCORE_GAP_M = 1e-3
+#: percentile of the error reported as CEP90
+CEP_PERCENTILE = 90.0
+
+
+def position_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Euclidean position error ‖p̂ − p‖ over the last axis.
+
+    Args:
+        estimate, truth: ``(..., 3)`` positions [m].
+
+    Returns:
+        ``(...)`` errors [m].
+    """
+    return np.sqrt(np.sum((np.asarray(estimate) - np.asarray(truth)) ** 2, axis=-1))
+
+
+def _values(errors: np.ndarray) -> np.ndarray:
+    e = np.asarray(errors, dtype=np.float64).ravel()
+    if e.size == 0:
+        raise ValueError("no error samples: the scored nodes and interval select nothing")
+    return e
+
+
+def rmse(errors: np.ndarray) -> float:
+    """Root mean square of the errors (any shape, at least one element)."""
+    e = _values(errors)
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def mean_error(errors: np.ndarray) -> float:
+    """Mean of the errors."""
+    return float(np.mean(_values(errors)))
+
+
+def median_error(errors: np.ndarray) -> float:
+    """Median of the errors."""
+    return float(np.median(_values(errors)))
+
+
+def max_error(errors: np.ndarray) -> float:
+    """Largest error."""
+    return float(np.max(_values(errors)))
+
+
+def cep90(errors: np.ndarray) -> float:
+    """90th percentile of the 3-D errors (numpy's linear interpolation)."""
+    return float(np.percentile(_values(errors), CEP_PERCENTILE))
+
+
+def window_steps(times: np.ndarray, window: tuple[float, float] | None) -> np.ndarray:
+    """Steps inside a half-open time window ``start ≤ t < end``.
+
+    Args:
+        times: ``(T,)`` step times [s].
+        window: ``(start, end)``, or None (no step).
+
+    Returns:
+        ``(T,)`` bool.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    if window is None or not np.all(np.isfinite(window)):
+        return np.zeros(times.shape, dtype=bool)
+    # a tolerance of a micro-step keeps k·dt == start inside despite rounding
+    eps = 1e-9
+    return (times >= window[0] - eps) & (times < window[1] - eps)
+
+
+def fault_rmse(errors: np.ndarray, fault_steps: np.ndarray) -> float | None:
+    """RMSE over the fault steps.
+
+    Args:
+        errors: ``(T, N)`` errors of the scored nodes over the scored interval.
+        fault_steps: ``(T,)`` bool, the steps that count as "during the fault".
+
+    Returns:
+        The RMSE, or None when no step is a fault step.
+    """
+    fault_steps = np.asarray(fault_steps, dtype=bool)
+    if not fault_steps.any():
+        return None
+    return rmse(np.asarray(errors)[fault_steps])
+
+
+def healthy_rmse(errors: np.ndarray, healthy: np.ndarray, steps: np.ndarray) -> float | None:
+    """RMSE of the healthy nodes over some steps.
+
+    Args:
+        errors: ``(T, N)`` errors of all UAVs.
+        healthy: ``(N,)`` bool, the healthy UAVs.
+        steps: ``(T,)`` bool, the steps to score.
+
+    Returns:
+        The RMSE, or None when no node or no step is selected.
+    """
+    healthy = np.asarray(healthy, dtype=bool)
+    steps = np.asarray(steps, dtype=bool)
+    if not healthy.any() or not steps.any():
+        return None
+    return rmse(np.asarray(errors)[steps][:, healthy])
+
+
+def diverged(errors: np.ndarray, threshold: float = DIVERGENCE_M) -> float:
+    """1.0 if any error exceeds ``threshold`` [m] (or is not finite), else 0.0."""
+    e = _values(errors)
+    return float(bool(np.any(~np.isfinite(e)) or np.any(e > threshold)))
+
+
+def jitter(applied: np.ndarray, previous: np.ndarray, valid: np.ndarray) -> float | None:
+    """Mean |α(k) − α(k−1)| over the valid channel-steps.
+
+    Args:
+        applied: ``(..., L)`` trust applied at each step.
+        previous: same shape, trust applied at the step before.
+        valid: same shape, measurement present.
+
+    Returns:
+        The mean, or None without valid channel-steps.
+    """
+    valid = np.asarray(valid, dtype=bool)
+    if not valid.any():
+        return None
+    return float(np.abs(np.asarray(applied) - np.asarray(previous))[valid].mean())
+
+
+def weight_var(applied: np.ndarray, valid: np.ndarray) -> float | None:
+    """Population variance of the applied trust over the valid channel-steps (None if none)."""
+    valid = np.asarray(valid, dtype=bool)
+    if not valid.any():
+        return None
+    return float(np.var(np.asarray(applied)[valid]))
+
+
+def anomaly_detection_rate(applied: np.ndarray, label: np.ndarray,
+                           threshold: float = DETECTION_TRUST) -> float | None:
+    """Fraction of labelled channel-steps whose applied trust is below ``threshold``.
+
+    Args:
+        applied: ``(..., L)`` trust applied.
+        label: same shape, ground-truth fault label (only valid channels are labelled).
+        threshold: detection threshold on α.
+
+    Returns:
+        The rate in [0, 1], or None without labelled channel-steps.
+    """
+    label = np.asarray(label, dtype=bool)
+    if not label.any():
+        return None
+    return float(np.mean(np.asarray(applied)[label] < threshold))
+
+
+def team_return(team_rewards: np.ndarray) -> float:
+    """Sum over steps of the team reward ``(T,)``."""
+    return float(np.sum(np.asarray(team_rewards, dtype=np.float64)))
+
+
+def normalized_score(rmse_method: float, rmse_uniform: float, rmse_oracle: float,
+                     min_gap: float = MIN_SCORE_GAP_M) -> float | None:
+    """D4RL-style score (uniform = 0, oracle = 1) of one episode.
+
+    Args:
+        rmse_method, rmse_uniform, rmse_oracle: the three RMSEs on the same episode [m].
+        min_gap: smallest RMSE_uniform − RMSE_oracle for which the score is defined.
+
+    Returns:
+        The score, or None when the oracle does not improve on uniform by ``min_gap``.
+    """
+    if not (np.isfinite(rmse_uniform) and np.isfinite(rmse_oracle) and np.isfinite(rmse_method)):
+        return None
+    if rmse_uniform - rmse_oracle < min_gap:
+        return None
+    return float(_normalized_score(rmse_method, rmse_uniform, rmse_oracle))
+
+
+class ChannelStats:
+    """Streaming sums behind ``jitter``, ``weight_var`` and ``anomaly_detection_rate``.
+
+    The runner cannot keep ``(T, B, N, L)`` trust arrays for large swarms, so it adds each
+    step's sums per episode; :meth:`jitter`, :meth:`weight_var` and
+    :meth:`anomaly_detection_rate` then equal the pure functions above on the stacked
+    arrays (tested).
+
+    Args:
+        batch_size: B.
+        nodes: ``(N,)`` bool, the scored UAVs.
+    """
+
+    def __init__(self, batch_size: int, nodes: np.ndarray) -> None:
+        self.nodes = np.asarray(nodes, dtype=bool)
+        z = lambda: np.zeros(batch_size)  # noqa: E731
+        self.n_valid, self.abs_delta, self.alpha_sum, self.alpha_sq = z(), z(), z(), z()
+        self.n_label, self.n_detected = z(), z()
+        # variance sums are taken around a per-episode shift (the first step's mean trust),
+        # so a constant trust gives exactly 0 and no cancellation creeps in
+        self.shift = np.full(batch_size, np.nan)
+
+    def add(self, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray, label: np.ndarray) -> None:
+        """Add one step (``(B, N, L)`` arrays) of the scored interval."""
+        n_b = applied.shape[0]
+        # rows (B, N_scored·L), reduced along the contiguous last axis: each episode's sum
+        # is computed the same way whatever B is (bit-identical alone or batched)
+        m = valid[:, self.nodes].reshape(n_b, -1)
+        a = applied[:, self.nodes].reshape(n_b, -1)
+        p = previous[:, self.nodes].reshape(n_b, -1)
+        lab = label[:, self.nodes].reshape(n_b, -1) & m
+        count = m.sum(axis=1)
+        first = np.isnan(self.shift) & (count > 0)
+        if first.any():
+            self.shift[first] = (a * m).sum(axis=1)[first] / count[first]
+        d = a - np.nan_to_num(self.shift)[:, None]
+        self.n_valid += count
+        self.abs_delta += (np.abs(a - p) * m).sum(axis=1)
+        self.alpha_sum += (d * m).sum(axis=1)
+        self.alpha_sq += (d * d * m).sum(axis=1)
+        self.n_label += lab.sum(axis=1)
+        self.n_detected += ((a < DETECTION_TRUST) & lab).sum(axis=1)
+
+    def jitter(self, b: int) -> float | None:
+        """Episode b's jitter (None without valid channel-steps)."""
+        return float(self.abs_delta[b] / self.n_valid[b]) if self.n_valid[b] > 0 else None
+
+    def weight_var(self, b: int) -> float | None:
+        """Episode b's trust variance (None without valid channel-steps)."""
+        n = self.n_valid[b]
+        if n <= 0:
+            return None
+        mean = self.alpha_sum[b] / n
+        # Var = E[d²] − E[d]² with d = α − shift (shift-invariant)
+        return float(max(self.alpha_sq[b] / n - mean * mean, 0.0))
+
+    def anomaly_detection_rate(self, b: int) -> float | None:
+        """Episode b's detection rate (None without labelled channel-steps)."""
+        return float(self.n_detected[b] / self.n_label[b]) if self.n_label[b] > 0 else None

@@ -1,0 +1,152 @@
+"""Per-episode recording while B episodes of one task run: what the metrics need.
+
+``EpisodeRecorder.record`` is called once per filter update with the batched estimate,
+truth, channel validity, fault labels, applied trust and FLOPs; ``episode_metrics(b)``
+then evaluates every metric of ``swarmloc.bench.evaluation.metrics`` for episode b. Only
+``(T, B, N)`` errors and streaming channel sums are kept, never ``(T, B, N, L)`` arrays.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.evaluation.alignment import align_estimates
+from swarmloc.bench.evaluation.traces import Trace
+from swarmloc.envs.reward import standard_reward
+from swarmloc.envs.specs import TaskSpec
+
+
+class EpisodeRecorder:
+    """Collects what the metrics need while B episodes of one task run.
+
+    Args:
+        spec: the task; seeds: ``(B,)``; schedule: the world's fault schedule (None for a
+            world without one, e.g. a recorded flight).
+        with_trust: the method exposes the trust it applied.
+        with_flops: the method reports FLOPs.
+        trace: keep a per-step record of episode 0.
+    """
+
+    def __init__(self, spec: TaskSpec, seeds: np.ndarray, schedule: Any, n_channels: int,
+                 with_trust: bool, with_flops: bool, trace: bool) -> None:
+        n_t, n_b, n = spec.n_steps, len(seeds), spec.n_uav
+        self.spec, self.seeds, self.schedule = spec, seeds, schedule
+        self.times = spec.dt * np.arange(1, n_t + 1)
+        self.scored_steps = self.times >= spec.scoring.start - 1e-9
+        self.nodes = np.zeros(n, dtype=bool)
+        self.nodes[list(spec.scored_nodes)] = True
+        self.errors = np.zeros((n_t, n_b, n))
+        # anchor-free tasks are scored after a yaw + translation alignment (bench/evaluation/alignment.py),
+        # which needs the whole episode: keep the positions and align once at the end
+        self.align = spec.scoring.align_first_seconds > 0
+        self._positions = (np.zeros((n_t, n_b, n, 3)), np.zeros((n_t, n_b, n, 3))) if self.align else None
+        self.team = np.zeros((n_t, n_b))
+        self.delay_ms = np.zeros(n_b)
+        self.energy_j = np.zeros(n_b)
+        self.label_steps = np.zeros((n_t, n_b), dtype=bool)
+        self.with_trust, self.with_flops = with_trust, with_flops
+        self.stats = M.ChannelStats(n_b, self.nodes) if with_trust else None
+        self.trace = None
+        if trace:
+            self.trace = {"estimate": np.zeros((n_t, n, 3)), "truth": np.zeros((n_t, n, 3)),
+                          "applied": np.ones((n_t, n, n_channels), dtype=np.float32) if with_trust else None,
+                          "valid": np.zeros((n_t, n, n_channels), dtype=bool),
+                          "label": np.zeros((n_t, n, n_channels), dtype=bool)}
+
+    def record(self, k: int, estimate: np.ndarray, truth: np.ndarray, valid: np.ndarray, label: np.ndarray,
+               applied: np.ndarray | None, previous: np.ndarray | None, flops: np.ndarray | None) -> None:
+        """Record update k (0-based) of every episode (``(B, N, ...)`` arrays)."""
+        s = self.spec
+        self.errors[k] = M.position_errors(estimate, truth)
+        if self._positions is not None:
+            self._positions[0][k], self._positions[1][k] = estimate, truth
+        self.label_steps[k] = label[:, self.nodes].any(axis=(1, 2))
+        # the reward counts every valid channel as used when the method exposes no trust
+        a = applied if applied is not None else np.ones(valid.shape)
+        p = previous if previous is not None else a
+        terms = standard_reward(estimate, truth, a, p, valid, s.filter.alpha_th,
+                                flops if flops is not None else np.zeros(estimate.shape[:2]))
+        self.team[k] = terms.reward.mean(axis=1)
+        if self.scored_steps[k]:
+            if flops is not None:
+                self.delay_ms += terms.delay_ms[:, self.nodes].mean(axis=1)
+                self.energy_j += terms.energy_j[:, self.nodes].mean(axis=1)
+            if self.stats is not None and applied is not None and previous is not None:
+                self.stats.add(applied, previous, valid, label)
+        if self.trace is not None:
+            tr = self.trace
+            tr["estimate"][k], tr["truth"][k] = estimate[0], truth[0]
+            tr["valid"][k], tr["label"][k] = valid[0], label[0]
+            if tr["applied"] is not None and applied is not None:
+                tr["applied"][k] = applied[0]
+
+    def _healthy(self, b: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Healthy UAVs and the steps they are scored on, or None where undefined."""
+        s, steps_ok = self.spec, self.scored_steps
+        sched = self.schedule
+        if s.scoring.healthy_nodes:
+            healthy = np.zeros(s.n_uav, dtype=bool)
+            healthy[list(s.scoring.healthy_nodes)] = True
+            if s.scoring.fault_window is not None:
+                return healthy, M.window_steps(self.times, s.scoring.fault_window) & steps_ok
+            span = sched.imu_fault_span()[b] if sched is not None else np.full(2, np.nan)
+            window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
+            return healthy, (M.window_steps(self.times, window) if window else steps_ok) & steps_ok
+        if s.faults.imu_cascade_random is not None and sched is not None:
+            healthy = ~sched.faulty_nodes[b]
+            span = sched.imu_fault_span()[b]
+            return healthy, M.window_steps(self.times, (float(span[0]), float(span[1]))) & steps_ok
+        return None
+
+    def _apply_alignment(self) -> None:
+        """Replace the errors by those after the task's scoring alignment (once, at the end)."""
+        if self._positions is not None:
+            estimate, truth = self._positions
+            self.errors = M.position_errors(align_estimates(self.spec, self.times, estimate, truth), truth)
+            self._positions = None
+
+    def episode_metrics(self, b: int) -> dict[str, float | None]:
+        """Every metric of episode b except ``normalized_score`` (None here)."""
+        self._apply_alignment()
+        s = self.spec
+        steps = self.scored_steps
+        e = self.errors[steps][:, b][:, self.nodes]
+        if s.scoring.fault_window is not None:
+            fault_steps = M.window_steps(self.times, s.scoring.fault_window)[steps]
+        else:
+            fault_steps = self.label_steps[steps, b]
+        healthy = self._healthy(b)
+        n_scored = max(int(steps.sum()), 1)
+        out: dict[str, float | None] = {
+            "rmse": M.rmse(e),
+            "mean_error": M.mean_error(e),
+            "median_error": M.median_error(e),
+            "max_error": M.max_error(e),
+            "cep90": M.cep90(e),
+            "fault_rmse": M.fault_rmse(e, fault_steps),
+            "healthy_rmse": None if healthy is None else M.healthy_rmse(self.errors[:, b], *healthy),
+            "diverged": M.diverged(e),
+            "delay_ms": float(self.delay_ms[b] / n_scored) if self.with_flops else None,
+            "energy_j": float(self.energy_j[b]) if self.with_flops else None,
+            "jitter": self.stats.jitter(b) if self.stats is not None else None,
+            "weight_var": self.stats.weight_var(b) if self.stats is not None else None,
+            "anomaly_detection_rate": self.stats.anomaly_detection_rate(b) if self.stats is not None else None,
+            "team_return": M.team_return(self.team[:, b]),
+            "normalized_score": None,
+        }
+        return out
+
+    def make_trace(self, method: str, layout_kind: np.ndarray) -> Trace | None:
+        """The trace of episode 0 (None if not kept)."""
+        if self.trace is None:
+            return None
+        window = self.spec.scoring.fault_window
+        if window is None and self.spec.faults.imu_cascade_random is not None and self.schedule is not None:
+            window = tuple(self.schedule.imu_fault_span()[0])
+        return Trace(method=method, task=self.spec.task_id, seed=int(self.seeds[0]), times=self.times.copy(),
+                     kind=np.asarray(layout_kind), scored=self.nodes.copy(),
+                     fault_window=np.array(window if window is not None else (np.nan, np.nan), dtype=float),
+                     **self.trace)

@@ -1,0 +1,419 @@
+"""The results file: what ``swarmloc evaluate`` writes and ``swarmloc submit`` reads.
+
+One JSON document per (method, suite) evaluation, with exactly this top-level shape::
+
+    {
+      "schema_version": 1,
+      "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
+      "suite":      {"name", "version", "sha256"},
+      "provenance": {"package_version", "git_commit", "created_utc",
+                     "python_version", "numpy_version", "torch_version",
+                     "machine": {"platform", "cpu_count"}},
+      "episodes":   [{"task", "seed", "metrics": {<every name in METRIC_NAMES>: float | null}}],
+      "aggregates": {"<task id>": {"<metric>": {"mean", "iqm", "ci_low", "ci_high"} | null}}
+    }
+
+A metric a task does not define (``fault_rmse`` on a fault-free task, say) is ``null``.
+Files are written atomically (temporary file, fsync, ``os.replace``) so a reader never
+sees half a file, and :func:`load_results` names the file and the problem when it is
+truncated, corrupted or does not match the schema.
+
+This module imports only the standard library and pydantic so that light tools (the
+leaderboard, the verification worker's parent) can read results cheaply.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
+
+from swarmloc.bench.common.files import write_bytes_atomic
+from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
+
+SCHEMA_VERSION: Literal[1] = 1
+"""Version of the results-file schema written by this module; bump on any change."""
+
+METRIC_NAMES: tuple[str, ...] = (
+    "rmse",
+    "mean_error",
+    "median_error",
+    "max_error",
+    "cep90",
+    "fault_rmse",
+    "healthy_rmse",
+    "diverged",
+    "delay_ms",
+    "energy_j",
+    "jitter",
+    "weight_var",
+    "anomaly_detection_rate",
+    "team_return",
+    "normalized_score",
+)
+"""Every per-episode metric, in the order they appear in results files."""
+
+AGGREGATE_FIELDS: tuple[str, ...] = ("mean", "iqm", "ci_low", "ci_high")
+"""Statistics kept per (task, metric): mean, interquartile mean, 95 % bootstrap CI of the mean."""
+
+
+class ResultsFileError(ValueError):
+    """A results file cannot be read: missing, truncated, corrupted or off-schema."""
+
+
+def _reject_text(value: Any) -> Any:
+    """Refuse strings where a number is expected (pydantic's lax mode would parse them)."""
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"expected a number or null, got the string {value!r}")
+    return value
+
+
+MetricValue = Annotated[float | None, BeforeValidator(_reject_text)]
+"""A metric value: a float (``int``/``bool`` are widened) or ``None`` when undefined."""
+
+_FROZEN = ConfigDict(extra="forbid", frozen=True, ser_json_inf_nan="constants")
+
+
+class MethodInfo(BaseModel):
+    """The evaluated method.
+
+    Attributes:
+        name: Human-readable method name.
+        entry_point: ``module:factory``, ``path/to/file.py:factory`` or a registered name.
+        weights_sha256: SHA-256 (hex) of the weights file, if the method loads one.
+        privileged: True when the method reads privileged information (truth, fault labels).
+        track: ``"A"`` (link trust inside the env's CEKF) or ``"B"`` (full estimator).
+        deterministic: True when re-running an episode reproduces its metrics bit for bit.
+    """
+
+    model_config = _FROZEN
+
+    name: str = Field(min_length=1, max_length=128)
+    entry_point: str = Field(min_length=1, max_length=512)
+    weights_sha256: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$")
+    privileged: bool
+    track: Literal["A", "B"]
+    deterministic: bool
+
+
+class SuiteInfo(BaseModel):
+    """The suite the method was evaluated on.
+
+    Attributes:
+        name: Suite name, e.g. ``standard-v0``.
+        version: Suite version string.
+        sha256: SHA-256 (hex) of the suite's (task, seed) list, see :func:`suite_sha256`.
+    """
+
+    model_config = _FROZEN
+
+    name: str = Field(min_length=1, max_length=128)
+    version: str = Field(min_length=1, max_length=64)
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+
+
+class EpisodeMetrics(BaseModel):
+    """Per-episode metrics; every name in :data:`METRIC_NAMES` must be present (``null`` allowed)."""
+
+    model_config = _FROZEN
+
+    rmse: MetricValue
+    mean_error: MetricValue
+    median_error: MetricValue
+    max_error: MetricValue
+    cep90: MetricValue
+    fault_rmse: MetricValue
+    healthy_rmse: MetricValue
+    diverged: MetricValue
+    delay_ms: MetricValue
+    energy_j: MetricValue
+    jitter: MetricValue
+    weight_var: MetricValue
+    anomaly_detection_rate: MetricValue
+    team_return: MetricValue
+    normalized_score: MetricValue
+
+    @classmethod
+    def of(cls, **known: float | None) -> EpisodeMetrics:
+        """Build metrics from the ones a task defines; the rest become ``None``.
+
+        Raises:
+            ValueError: if a name is not in :data:`METRIC_NAMES`.
+        """
+        unknown = sorted(set(known) - set(METRIC_NAMES))
+        if unknown:
+            raise ValueError(f"unknown metric name(s) {unknown}; allowed: {list(METRIC_NAMES)}")
+        return cls.model_validate({name: known.get(name) for name in METRIC_NAMES})
+
+
+class Episode(BaseModel):
+    """One evaluated (task, seed) pair and its metrics."""
+
+    model_config = _FROZEN
+
+    task: str = Field(min_length=1, max_length=128)
+    seed: int = Field(ge=0)
+    metrics: EpisodeMetrics
+
+
+class Aggregate(BaseModel):
+    """Statistics of one metric over a task's seeds (the CI is for the mean)."""
+
+    model_config = _FROZEN
+
+    mean: float
+    iqm: float
+    ci_low: float
+    ci_high: float
+
+
+class Results(BaseModel):
+    """A complete results file (see the module docstring for the shape)."""
+
+    model_config = _FROZEN
+
+    schema_version: Literal[1] = SCHEMA_VERSION
+    method: MethodInfo
+    suite: SuiteInfo
+    provenance: Provenance
+    episodes: list[Episode] = Field(min_length=1)
+    aggregates: dict[str, dict[str, Aggregate | None]]
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Results:
+        """Episodes are unique and the aggregates cover exactly the evaluated tasks."""
+        counts = Counter((e.task, e.seed) for e in self.episodes)
+        repeated = sorted(k for k, n in counts.items() if n > 1)
+        if repeated:
+            raise ValueError(f"episodes listed more than once (task, seed): {repeated[:10]}")
+        tasks = {e.task for e in self.episodes}
+        if set(self.aggregates) != tasks:
+            missing = sorted(tasks - set(self.aggregates))
+            extra = sorted(set(self.aggregates) - tasks)
+            raise ValueError(
+                f"aggregates must have one entry per evaluated task; "
+                f"missing {missing}, not evaluated {extra}"
+            )
+        for task, per_metric in self.aggregates.items():
+            if set(per_metric) != set(METRIC_NAMES):
+                raise ValueError(
+                    f"aggregates[{task!r}] must list every metric in {list(METRIC_NAMES)} "
+                    f"(null when undefined); got {sorted(per_metric)}"
+                )
+        return self
+
+    def episode_keys(self) -> list[tuple[str, int]]:
+        """The evaluated (task, seed) pairs in file order."""
+        return [(e.task, e.seed) for e in self.episodes]
+
+
+def suite_sha256(episodes: Iterable[tuple[str, int]]) -> str:
+    """Canonical SHA-256 of a suite's (task, seed) list.
+
+    The list is sorted first, so the hash names the set of episodes, not their order.
+
+    Args:
+        episodes: (task ID, seed) pairs.
+
+    Returns:
+        Lower-case hex digest of the compact JSON ``[[task, seed], ...]``.
+    """
+    canonical = sorted((str(task), int(seed)) for task, seed in episodes)
+    text = json.dumps([list(pair) for pair in canonical], separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def make_results(
+    method: MethodInfo,
+    suite: SuiteInfo,
+    episodes: Sequence[Episode | Mapping[str, Any]],
+    provenance: Provenance | None = None,
+) -> Results:
+    """Assemble a :class:`Results` from per-episode metrics, computing the aggregates.
+
+    Args:
+        method: The evaluated method.
+        suite: The suite it ran on.
+        episodes: ``Episode`` objects or dicts ``{"task", "seed", "metrics": {...}}``.
+        provenance: Defaults to :func:`collect_provenance`.
+
+    Returns:
+        The validated results, aggregates from :func:`swarmloc.bench.evaluation.stats.aggregate`.
+    """
+    from swarmloc.bench.evaluation.stats import aggregate  # local: stats imports this module
+
+    parsed = [e if isinstance(e, Episode) else Episode.model_validate(e) for e in episodes]
+    return Results(
+        method=method,
+        suite=suite,
+        provenance=provenance or collect_provenance(),
+        episodes=parsed,
+        aggregates=aggregate(parsed),
+    )
+
+
+def dumps_results(results: Results) -> str:
+    """Serialize results to the JSON text written by :func:`write_results`."""
+    return results.model_dump_json(indent=1) + "\n"
+
+
+def write_results(path: str | os.PathLike[str], results: Results) -> Path:
+    """Write a results file atomically.
+
+    The text goes to a temporary file in the same directory, is flushed and fsynced,
+    then ``os.replace``-d over ``path``; the directory is fsynced too where possible.
+    A crash at any point leaves either the old file or the new one, never half of one.
+
+    Args:
+        path: Destination file; its parent directory must exist.
+        results: The results to write.
+
+    Returns:
+        The destination path.
+    """
+    return write_bytes_atomic(path, dumps_results(results).encode("utf-8"))
+
+
+def _describe_validation_error(err: ValidationError, limit: int = 8) -> str:
+    """Compact, readable list of pydantic errors: ``location: message``."""
+    lines = []
+    for item in err.errors()[:limit]:
+        loc = ".".join(str(part) for part in item["loc"]) or "(top level)"
+        lines.append(f"  {loc}: {item['msg']}")
+    more = err.error_count() - limit
+    if more > 0:
+        lines.append(f"  ... and {more} more")
+    return "\n".join(lines)
+
+
+def _ends_inside_value(text: str) -> bool:
+    """True when the text stops inside a string or with brackets left open."""
+    depth, in_string, escaped = 0, False, False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "{[":
+            depth += 1
+        elif char in "}]":
+            depth -= 1
+    return in_string or depth > 0
+
+
+def parse_results(text: str | bytes, source: str = "<results>") -> Results:
+    """Parse and validate results JSON text.
+
+    Args:
+        text: The file contents.
+        source: Name used in error messages (usually the path).
+
+    Raises:
+        ResultsFileError: naming ``source`` and what is wrong (bad JSON and where,
+            likely truncation, unsupported schema version, or schema violations).
+    """
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise ResultsFileError(
+                f"results file {source} is corrupted: not UTF-8 text ({err})"
+            ) from None
+    if not text.strip():
+        raise ResultsFileError(f"results file {source} is empty")
+    try:
+        raw = json.loads(text)
+    except json.JSONDecodeError as err:
+        truncated = err.pos >= len(text.rstrip()) or _ends_inside_value(text)
+        problem = "truncated (the JSON ends early)" if truncated else "corrupted (invalid JSON)"
+        raise ResultsFileError(
+            f"results file {source} is {problem}: {err.msg} (line {err.lineno}, "
+            f"column {err.colno})"
+        ) from None
+    if not isinstance(raw, dict):
+        raise ResultsFileError(
+            f"results file {source} must hold a JSON object, got {type(raw).__name__}"
+        )
+    version = raw.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise ResultsFileError(
+            f"results file {source} has schema_version {version!r}; this swarmloc reads "
+            f"schema_version {SCHEMA_VERSION} only"
+        )
+    try:
+        return Results.model_validate(raw)
+    except ValidationError as err:
+        raise ResultsFileError(
+            f"results file {source} does not match the results schema "
+            f"({err.error_count()} problem(s)):\n{_describe_validation_error(err)}"
+        ) from None
+
+
+def load_results(path: str | os.PathLike[str], max_bytes: int | None = None) -> Results:
+    """Read and validate a results file.
+
+    Args:
+        path: The file.
+        max_bytes: Refuse files larger than this (checked before reading), if given.
+
+    Returns:
+        The validated :class:`Results`.
+
+    Raises:
+        ResultsFileError: naming the file and the problem: missing, too large, not
+            UTF-8, truncated or otherwise invalid JSON, wrong schema version, or a
+            schema violation (with the offending fields).
+    """
+    file = Path(path)
+    try:
+        size = file.stat().st_size
+    except FileNotFoundError:
+        raise ResultsFileError(f"results file {file} does not exist") from None
+    if not file.is_file():
+        raise ResultsFileError(f"results file {file} is not a regular file")
+    if max_bytes is not None and size > max_bytes:
+        raise ResultsFileError(
+            f"results file {file} is {size} bytes; the limit is {max_bytes} bytes"
+        )
+    return parse_results(file.read_bytes(), source=str(file))
+
+
+__all__ = [
+    "AGGREGATE_FIELDS",
+    "METRIC_NAMES",
+    "SCHEMA_VERSION",
+    "Aggregate",
+    "Episode",
+    "EpisodeMetrics",
+    "MachineInfo",
+    "MethodInfo",
+    "Provenance",
+    "Results",
+    "ResultsFileError",
+    "SuiteInfo",
+    "collect_provenance",
+    "dumps_results",
+    "load_results",
+    "make_results",
+    "parse_results",
+    "suite_sha256",
+    "write_results",
+]

@@ -1,0 +1,277 @@
+"""Aggregate statistics over seeds: mean, IQM, stratified bootstrap CIs, normalized score.
+
+Following rliable's recommendation (Agarwal et al., 2021) we report the mean and the
+interquartile mean (IQM) of each metric over seeds, with a 95 % percentile-bootstrap
+confidence interval of the mean. Across several tasks the bootstrap is *stratified*:
+each resample draws seeds with replacement inside every task separately, so each task
+keeps its number of runs. Resampling uses a seeded numpy generator and sorts runs by
+(task, seed) first, so the same episodes give the same interval in any order.
+
+The normalized task score is D4RL-style:
+``(RMSE_uniform − RMSE_method) / (RMSE_uniform − RMSE_oracle)``,
+0 for uniform-trust CEKF and 1 for the privileged oracle trust.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Hashable, Iterable, Mapping, Sequence
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Aggregate, Episode
+
+Statistic = Literal["mean", "iqm"]
+
+DEFAULT_RESAMPLES: int = 2000
+"""Bootstrap resamples per interval."""
+
+DEFAULT_CONFIDENCE: float = 0.95
+"""Two-sided confidence level of the intervals."""
+
+DEFAULT_BOOTSTRAP_SEED: int = 0
+"""Seed of the bootstrap generator (fixed so that aggregates are reproducible)."""
+
+
+def _as_1d(values: ArrayLike) -> NDArray[np.float64]:
+    x = np.asarray(values, dtype=np.float64)
+    if x.ndim != 1:
+        raise ValueError(f"expected a 1-D sequence of values, got shape {x.shape}")
+    if x.size == 0:
+        raise ValueError("expected at least one value, got an empty sequence")
+    return x
+
+
+def mean(values: ArrayLike) -> float:
+    """Arithmetic mean of a non-empty 1-D sequence."""
+    return float(np.mean(_as_1d(values)))
+
+
+def _iqm_along_last(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """IQM over the last axis: drop ⌊n/4⌋ values from each end, average the rest."""
+    n = x.shape[-1]
+    cut = n // 4
+    ordered = np.sort(x, axis=-1)
+    return np.mean(ordered[..., cut : n - cut], axis=-1)
+
+
+def iqm(values: ArrayLike) -> float:
+    """Interquartile mean: the mean of the middle 50 % of the values.
+
+    ⌊n/4⌋ values are dropped from each end of the sorted sequence (a 25 % trimmed
+    mean), so for n < 4 it is the plain mean.
+
+    Args:
+        values: Non-empty 1-D sequence.
+
+    Returns:
+        The interquartile mean.
+    """
+    return float(_iqm_along_last(_as_1d(values)))
+
+
+def _apply(statistic: Statistic, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    if statistic == "mean":
+        return np.mean(samples, axis=-1)
+    if statistic == "iqm":
+        return _iqm_along_last(samples)
+    raise ValueError(f"unknown statistic {statistic!r}; allowed: 'mean', 'iqm'")
+
+
+def bootstrap_ci(
+    values: ArrayLike,
+    strata: Sequence[Hashable] | None = None,
+    *,
+    statistic: Statistic = "mean",
+    confidence: float = DEFAULT_CONFIDENCE,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_BOOTSTRAP_SEED,
+) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval, stratified when ``strata`` is given.
+
+    Each resample draws, inside every stratum (task), as many values with replacement
+    as the stratum holds, pools the draws, and applies ``statistic``. The interval is
+    the ``(1 − confidence)/2`` and ``(1 + confidence)/2`` quantiles of the resampled
+    statistic, clipped to the range of the data (which contains every resampled mean
+    or IQM; the clip only removes floating-point rounding, so a constant gives exactly
+    that constant).
+
+    Args:
+        values: Non-empty 1-D values (one per run).
+        strata: Stratum label per value (e.g. the task ID); ``None`` = one stratum.
+        statistic: ``"mean"`` or ``"iqm"``.
+        confidence: In (0, 1).
+        n_resamples: At least 1.
+        seed: Seed of the numpy generator.
+
+    Returns:
+        ``(low, high)``.
+    """
+    x = _as_1d(values)
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
+    if n_resamples < 1:
+        raise ValueError(f"n_resamples must be at least 1, got {n_resamples}")
+    labels: Sequence[Hashable] = [0] * x.size if strata is None else strata
+    if len(labels) != x.size:
+        raise ValueError(f"strata has {len(labels)} labels for {x.size} values; they must match")
+    groups: dict[Hashable, list[int]] = defaultdict(list)
+    for index, label in enumerate(labels):
+        groups[label].append(index)
+    rng = np.random.default_rng(seed)
+    samples = np.empty((n_resamples, x.size), dtype=np.float64)
+    column = 0
+    for label in sorted(groups, key=repr):
+        members = x[groups[label]]
+        draws = rng.integers(0, members.size, size=(n_resamples, members.size))
+        samples[:, column : column + members.size] = members[draws]
+        column += members.size
+    resampled = _apply(statistic, samples)
+    tail = (1.0 - confidence) / 2.0
+    low, high = np.quantile(resampled, [tail, 1.0 - tail])
+    lo_data, hi_data = float(np.min(x)), float(np.max(x))
+    return float(np.clip(low, lo_data, hi_data)), float(np.clip(high, lo_data, hi_data))
+
+
+def summarize(
+    values: ArrayLike,
+    strata: Sequence[Hashable] | None = None,
+    *,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_BOOTSTRAP_SEED,
+) -> Aggregate:
+    """Mean, IQM and the 95 % (stratified) bootstrap CI of the mean of some runs."""
+    x = _as_1d(values)
+    low, high = bootstrap_ci(x, strata, n_resamples=n_resamples, seed=seed)
+    return Aggregate(mean=mean(x), iqm=iqm(x), ci_low=low, ci_high=high)
+
+
+def normalized_score(
+    rmse_method: ArrayLike, rmse_uniform: ArrayLike, rmse_oracle: ArrayLike
+) -> Any:
+    """D4RL-style normalized score: ``(uniform − method) / (uniform − oracle)``.
+
+    0 means as good as uniform-trust CEKF, 1 as good as the privileged oracle trust;
+    it can be negative (worse than uniform) or above 1.
+
+    Args:
+        rmse_method: RMSE of the scored method (scalar or array).
+        rmse_uniform: RMSE of uniform trust on the same episode(s).
+        rmse_oracle: RMSE of oracle trust on the same episode(s).
+
+    Returns:
+        A float for scalar inputs, else an array.
+
+    Raises:
+        ValueError: where uniform and oracle RMSE are equal (the score is undefined).
+    """
+    m = np.asarray(rmse_method, dtype=np.float64)
+    u = np.asarray(rmse_uniform, dtype=np.float64)
+    o = np.asarray(rmse_oracle, dtype=np.float64)
+    span = u - o
+    if np.any(span == 0.0):
+        raise ValueError(
+            f"normalized score undefined: uniform RMSE {u.tolist()} equals oracle RMSE "
+            f"{o.tolist()}; they must differ"
+        )
+    score = (u - m) / span
+    return float(score) if score.ndim == 0 else score
+
+
+def _episode_parts(episode: Episode | Mapping[str, Any]) -> tuple[str, int, Mapping[str, Any]]:
+    if isinstance(episode, Episode):
+        return episode.task, episode.seed, episode.metrics.model_dump()
+    metrics = episode["metrics"]
+    if not isinstance(metrics, Mapping):
+        metrics = metrics.model_dump()
+    return str(episode["task"]), int(episode["seed"]), metrics
+
+
+def aggregate(
+    episodes: Iterable[Episode | Mapping[str, Any]],
+    *,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_BOOTSTRAP_SEED,
+) -> dict[str, dict[str, Aggregate | None]]:
+    """Per-task aggregates of every metric over seeds, in the results-file shape.
+
+    Args:
+        episodes: ``Episode`` objects or dicts ``{"task", "seed", "metrics"}``.
+        n_resamples: Bootstrap resamples per interval.
+        seed: Bootstrap seed.
+
+    Returns:
+        ``{task: {metric: Aggregate | None}}`` for every task and every name in
+        ``METRIC_NAMES``; ``None`` where no seed of the task defines the metric.
+        Seeds whose value is ``None`` are left out of that metric's statistics.
+    """
+    by_task: dict[str, list[tuple[int, Mapping[str, Any]]]] = defaultdict(list)
+    for episode in episodes:
+        task, episode_seed, metrics = _episode_parts(episode)
+        by_task[task].append((episode_seed, metrics))
+    out: dict[str, dict[str, Aggregate | None]] = {}
+    for task in sorted(by_task):
+        runs = sorted(by_task[task], key=lambda item: item[0])
+        out[task] = {}
+        for name in METRIC_NAMES:
+            values = [m[name] for _, m in runs if m.get(name) is not None]
+            out[task][name] = (
+                summarize(values, n_resamples=n_resamples, seed=seed) if values else None
+            )
+    return out
+
+
+def aggregate_across_tasks(
+    episodes: Iterable[Episode | Mapping[str, Any]],
+    metric: str = "normalized_score",
+    *,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_BOOTSTRAP_SEED,
+) -> Aggregate | None:
+    """One metric pooled over all (task, seed) runs, with a task-stratified bootstrap CI.
+
+    This is the leaderboard's headline number (``metric="normalized_score"``): mean and
+    IQM of all runs pooled, and the 95 % CI of the mean from resampling seeds within
+    each task.
+
+    Args:
+        episodes: ``Episode`` objects or dicts ``{"task", "seed", "metrics"}``.
+        metric: A name from ``METRIC_NAMES``.
+        n_resamples: Bootstrap resamples.
+        seed: Bootstrap seed.
+
+    Returns:
+        The aggregate, or ``None`` when no episode defines the metric.
+    """
+    if metric not in METRIC_NAMES:
+        raise ValueError(f"unknown metric {metric!r}; allowed: {list(METRIC_NAMES)}")
+    runs = []
+    for episode in episodes:
+        task, episode_seed, metrics = _episode_parts(episode)
+        if metrics.get(metric) is not None:
+            runs.append((task, episode_seed, float(metrics[metric])))
+    if not runs:
+        return None
+    runs.sort(key=lambda item: (item[0], item[1]))
+    return summarize(
+        [value for _, _, value in runs],
+        [task for task, _, _ in runs],
+        n_resamples=n_resamples,
+        seed=seed,
+    )
+
+
+__all__ = [
+    "DEFAULT_BOOTSTRAP_SEED",
+    "DEFAULT_CONFIDENCE",
+    "DEFAULT_RESAMPLES",
+    "aggregate",
+    "aggregate_across_tasks",
+    "bootstrap_ci",
+    "iqm",
+    "mean",
+    "normalized_score",
+    "summarize",
+]

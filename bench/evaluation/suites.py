@@ -1,0 +1,213 @@
+"""Evaluation suites: frozen lists of (task ID, seed) episodes.
+
+Seed ranges live in ``swarmloc.envs.seeds`` (training ``[0, 1_000_000)``, test from
+1_000_000, dev from 2_000_000; methods never see seeds): ``standard-v0`` and ``quick`` use
+test seeds 1_000_000 + i, ``dev`` uses 2_000_000 + i.
+
+Training code must call :func:`check_training_seeds` on the seeds it draws; tuning may
+use dev seeds, never test seeds. Suites:
+
+* ``standard-v0`` — the leaderboard suite: the 17 tasks of v0 (:data:`STANDARD_V0_TASKS`,
+  frozen: a task added later joins in ``standard-v1``), 32 test seeds each
+  (1_000_000 … 1_000_031). Its SHA-256 is pinned in the tests.
+* ``quick`` — every simulated task in the catalogue, the first 4 test seeds (on the
+  ``standard-v0`` tasks a subset of its episodes); for demos and smoke tests.
+* ``dev`` — every simulated task in the catalogue, 8 dev seeds (2_000_000 … 2_000_007);
+  for tuning.
+
+* ``real-v0`` — real flights replayed from imported data (:data:`REAL_V0_TASKS`: the UTIL
+  Crazyflie flight ``UTILFlight-v0``), 4 test seeds each. Every seed replays the same
+  recording (the seed moves only the initial prior). It runs only where the data is
+  imported (``SWARMLOC_DATA``); :func:`require_data` says what is missing and how to
+  import it.
+
+Tasks that replay recorded flights (trajectory kind ``recorded``) need a data set the
+repository does not ship, so the catalogue-wide suites leave them out.
+
+The hash of a suite is :func:`swarmloc.bench.evaluation.results.suite_sha256` of its episode list
+(the sorted (task, seed) pairs as compact JSON), the same value a results file records.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from swarmloc.bench.evaluation.results import suite_sha256
+from swarmloc.envs.seeds import (  # noqa: F401  (re-exported: the suites' seed ranges)
+    DEV_SEED_START,
+    RESERVED_SEED_START,
+    TEST_SEED_START,
+    TRAINING_SEED_LIMIT,
+    check_training_seeds,
+)
+from swarmloc.envs.tasks import CATALOGUE, canonical_task_id, get_spec
+
+
+#: the tasks of ``standard-v0`` (frozen with the suite)
+STANDARD_V0_TASKS: tuple[str, ...] = (
+    "swarmloc/Ideal-v0",
+    "swarmloc/NLOS-v0",
+    "swarmloc/NLOSStep-v0",
+    "swarmloc/Scale2-v0",
+    "swarmloc/Scale4-v0",
+    "swarmloc/Scale6-v0",
+    "swarmloc/Scale8-v0",
+    "swarmloc/Scale16-v0",
+    "swarmloc/Scale32-v0",
+    "swarmloc/CascadedFault-v0",
+    "swarmloc/CascadedFaultRandom-v0",
+    "swarmloc/VisionLoss-v0",
+    "swarmloc/Indoor-v0",
+    "swarmloc/HybridNoise10-v0",
+    "swarmloc/HybridNoise30-v0",
+    "swarmloc/HybridNoise50-v0",
+    "swarmloc/GradualFault-v0",
+)
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A frozen list of episodes.
+
+    Attributes:
+        name: e.g. ``standard-v0``.
+        version: version string (bumped whenever the episode list changes).
+        episodes: ``(task ID, seed)`` pairs, grouped by task in catalogue order.
+        description: one line.
+    """
+
+    name: str
+    version: str
+    episodes: tuple[tuple[str, int], ...]
+    description: str = ""
+    sha256: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sha256", suite_sha256(self.episodes))
+
+    @property
+    def tasks(self) -> list[str]:
+        """Task IDs in suite order (each once)."""
+        return list(dict.fromkeys(task for task, _ in self.episodes))
+
+    def seeds(self, task: str) -> list[int]:
+        """Seeds of ``task`` in suite order."""
+        return [s for t, s in self.episodes if t == task]
+
+
+def _episodes(tasks: Iterable[str], start: int, count: int) -> tuple[tuple[str, int], ...]:
+    return tuple((task, start + i) for task in tasks for i in range(count))
+
+
+def _standard_v0() -> Suite:
+    return Suite("standard-v0", "0", _episodes(STANDARD_V0_TASKS, TEST_SEED_START, 32),
+                 "leaderboard suite: 17 tasks × 32 test seeds (1_000_000 … 1_000_031)")
+
+
+def simulated_tasks() -> list[str]:
+    """Catalogue tasks that run without external data (not recorded-flight replays)."""
+    return [t for t in CATALOGUE if get_spec(t).trajectory.kind != "recorded"]
+
+
+def _quick() -> Suite:
+    return Suite("quick", "0", _episodes(simulated_tasks(), TEST_SEED_START, 4),
+                 "every task × the first 4 test seeds (demo, smoke tests)")
+
+
+def _dev() -> Suite:
+    return Suite("dev", "0", _episodes(simulated_tasks(), DEV_SEED_START, 8),
+                 "every task × 8 dev seeds (2_000_000 … 2_000_007), for tuning")
+
+
+#: the tasks of ``real-v0`` (frozen with the suite)
+REAL_V0_TASKS: tuple[str, ...] = ("swarmloc/UTILFlight-v0",)
+
+
+def _real_v0() -> Suite:
+    return Suite("real-v0", "0", _episodes(REAL_V0_TASKS, TEST_SEED_START, 4),
+                 "real flights replayed from imported data (UTIL twr-obs-log1) × 4 test seeds; needs SWARMLOC_DATA")
+
+
+SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0}
+
+
+def missing_data(suite: Suite) -> dict[str, str]:
+    """Tasks of ``suite`` whose external data is absent here, with the reason (empty: it runs here).
+
+    Args:
+        suite: the suite.
+
+    Returns:
+        task ID → message naming where the data comes from and the command that imports it.
+    """
+    from swarmloc.envs.worlds import data_missing
+
+    found = {}
+    for task in suite.tasks:
+        why = data_missing(get_spec(task))
+        if why is not None:
+            found[task] = why
+    return found
+
+
+def require_data(suite: Suite) -> None:
+    """Refuse to run a suite whose external data is absent here.
+
+    Raises:
+        FileNotFoundError: naming the suite, the tasks, where the data comes from and how to
+            import it.
+    """
+    missing = missing_data(suite)
+    if missing:
+        first = next(iter(missing.values()))
+        raise FileNotFoundError(f"suite {suite.name!r} needs data that is not here (task(s) "
+                                f"{', '.join(missing)}):\n{first}")
+
+
+def suite_names() -> list[str]:
+    """Names accepted by :func:`get_suite`."""
+    return list(SUITES)
+
+
+def get_suite(name: str) -> Suite:
+    """The suite called ``name``.
+
+    Raises:
+        KeyError: unknown name (the message lists the known suites).
+    """
+    if name not in SUITES:
+        raise KeyError(f"unknown suite {name!r}; known suites: {', '.join(SUITES)}")
+    return SUITES[name]()
+
+
+def restrict_tasks(suite: Suite, tasks: Sequence[str] | str) -> Suite:
+    """The part of ``suite`` on some of its tasks (``--tasks``).
+
+    The result is a different suite (name ``<name>-subset``, its own hash), so a results
+    file of a restricted run is never mistaken for a full one.
+
+    Args:
+        suite: the suite.
+        tasks: task IDs (the ``swarmloc/`` prefix may be omitted), or one comma-separated string.
+
+    Returns:
+        The restricted suite, in the suite's task order.
+
+    Raises:
+        ValueError: empty selection or a task the suite does not hold (the message lists them).
+    """
+    if isinstance(tasks, str):
+        tasks = [t for t in tasks.split(",")]
+    names = [t.strip() for t in tasks if t.strip()]
+    if not names:
+        raise ValueError(f"--tasks selects no task; choose from: {', '.join(suite.tasks)}")
+    ids = {t: canonical_task_id(t) for t in names if t in CATALOGUE or f"swarmloc/{t}" in CATALOGUE}
+    wanted = [ids.get(t, t) for t in names]
+    unknown = [t for t in wanted if t not in suite.tasks]
+    if unknown:
+        raise ValueError(f"task(s) {unknown} not in suite {suite.name!r}; choose from: {', '.join(suite.tasks)}")
+    keep = set(wanted)
+    episodes = tuple((t, s) for t, s in suite.episodes if t in keep)
+    return Suite(f"{suite.name}-subset", suite.version, episodes,
+                 f"{suite.name} restricted to {len(keep)} task(s)")

@@ -1,0 +1,126 @@
+"""What the paper reproductions share: test seeds, runner metrics, per-step errors, paired orderings.
+
+Headline RMSEs and every ordering come from the runner (``rollout``, the leaderboard's
+metrics). Per-axis and per-UAV breakdowns and the raw-range anomaly statistics need
+per-step errors and the truth, so :func:`episode_errors` replays the runner's loop (same
+world, measurements, alignment) and keeps them. Our worlds are not the papers'
+simulators: compare orderings and magnitudes, not digits.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
+from swarmloc.agents.registry import LoadedMethod
+from swarmloc.bench.common.provenance import collect_provenance
+from swarmloc.bench.common.reports import report_path, write_report
+from swarmloc.bench.evaluation.alignment import align_estimates
+from swarmloc.bench.evaluation.runner import rollout, single_threaded_kernels
+from swarmloc.bench.evaluation.stats import bootstrap_ci
+from swarmloc.bench.evaluation.suites import TEST_SEED_START
+from swarmloc.envs.channels import PEER
+from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.world import World
+
+Factory = Callable[[], Any]
+
+
+def seeds_from(n: int) -> list[int]:
+    """The first ``n`` test seeds (1_000_000 …)."""
+    if n < 2:
+        raise ValueError(f"need at least 2 seeds for confidence intervals, got {n}")
+    return list(range(TEST_SEED_START, TEST_SEED_START + n))
+
+
+def runner_metrics(label: str, make: Factory, spec: TaskSpec, seeds: list[int]) -> list[dict]:
+    """Per-seed runner metrics of a configured estimator (``rollout``, as ``swarmloc evaluate``)."""
+    loaded = LoadedMethod(name=label, entry_point=label, track="B", privileged=False, deterministic=True,
+                          method=make())
+    metrics, _ = rollout(loaded, spec, seeds)
+    return metrics
+
+
+def episode_errors(make: Factory, spec: TaskSpec, seeds: list[int]) -> dict[str, np.ndarray]:
+    """The runner's Track B loop, keeping per-step errors, trust and the raw range errors.
+
+    Returns:
+        ``err`` (T, B, N, 3) estimate − truth after the task's scoring alignment,
+        ``times`` (T,), ``weights`` (T, B, N, L) applied trust (ones if none reported),
+        ``range_err`` (T, B, N, L) |measured − true range| on peer channels (NaN elsewhere),
+        ``valid`` (T, B, N, L), ``step_ms`` mean wall time of ``step`` [ms].
+    """
+    world = World(spec, len(seeds))
+    x0 = world.reset(seeds).copy()
+    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
+    est = make()
+    est.reset(facts, facts.x0)
+    peer = world.layout.kind == PEER
+    target = np.where(peer, world.layout.target, 0)
+    T = spec.n_steps
+    pos, truth = np.zeros((T, len(seeds), spec.n_uav, 3)), np.zeros((T, len(seeds), spec.n_uav, 3))
+    weights = np.ones((T, len(seeds)) + peer.shape)
+    range_err = np.full((T, len(seeds)) + peer.shape, np.nan)
+    valid = np.zeros((T, len(seeds)) + peer.shape, dtype=bool)
+    spent = 0.0
+    with single_threaded_kernels():
+        for k in range(T):
+            buf = world.sense()
+            meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1, buf.velocity)
+            t0 = time.perf_counter()
+            out = est.step(meas)
+            spent += time.perf_counter() - t0
+            pos[k], truth[k], valid[k] = out.positions, buf.pos, buf.valid
+            if out.weights is not None:
+                weights[k] = out.weights
+            d = np.linalg.norm(buf.pos[:, :, None, :] - buf.pos[:, target, :], axis=-1)
+            range_err[k] = np.where(peer, np.abs(buf.z[..., 0] - d), np.nan)
+    times = spec.dt * np.arange(1, T + 1)
+    err = align_estimates(spec, times, pos, truth) - truth
+    return {"err": err, "times": times, "weights": weights, "range_err": range_err, "valid": valid,
+            "step_ms": 1e3 * spent / T}
+
+
+def paired(a: np.ndarray, b: np.ndarray, claim: str) -> dict:
+    """The claim "a < b" on paired per-seed values: mean difference a − b and its 95 % bootstrap CI."""
+    d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    lo, hi = bootstrap_ci(d)
+    return {"claim": claim, "mean_diff": float(d.mean()), "ci": [lo, hi], "holds": bool(d.mean() < 0),
+            "significant": bool(hi < 0), "contradicted": bool(lo > 0), "wins": int((d < 0).sum()), "n": int(d.size)}
+
+
+def verdict(row: dict) -> str:
+    if row["significant"]:
+        return "holds (CI < 0)"
+    if row["contradicted"]:
+        return "reversed (CI > 0)"
+    return "not resolved (CI ∋ 0)"
+
+
+def ordering_table(rows: list[dict]) -> list[str]:
+    out = ["| claim | mean difference (m) | 95 % CI | verdict | seeds won |", "|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['claim']} | {r['mean_diff']:+.4f} | [{r['ci'][0]:+.4f}, {r['ci'][1]:+.4f}] "
+                   f"| {verdict(r)} | {r['wins']}/{r['n']} |")
+    return out
+
+
+def mean_sd(values: np.ndarray, digits: int = 3) -> str:
+    v = np.asarray(values, dtype=float)
+    return f"{v.mean():.{digits}f} ± {v.std(ddof=1):.{digits}f}"
+
+
+def write_paper_report(out: Path, name: str, text: str, raw: dict) -> Path:
+    """Write ``<out>`` (or ``<out>/<name>.md``) and the raw numbers beside it, atomically.
+
+    The report ends with its provenance (package version and git commit).
+    """
+    prov = collect_provenance()
+    raw = {**raw, "provenance": prov.model_dump(mode="json")}
+    text += (f"\n---\nGenerated by `swarmloc reproduce {name}` with swarmloc {prov.package_version}, commit "
+             f"{(prov.git_commit or 'unknown')[:10]}.\n")
+    return write_report(report_path(out, name), text, raw)

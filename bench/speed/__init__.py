@@ -1,0 +1,6 @@
+"""Speed benchmarks: throughput measured side by side on identical inputs, in one run.
+
+``kernels`` (FilterPy vs our numpy reference vs the numba CEKF kernel, and the full world
+step), ``envs`` (our adapters beside other multi-agent envs), ``estimators`` (Track B
+estimators per step). Run them all with ``swarmloc bench speed [--json PATH]``.
+"""

@@ -1,0 +1,151 @@
+"""``swarmloc train mappo``: the MAPPO training script with the bench's seeds and evaluation.
+
+The algorithm lives in ``swarmloc.agents.mappo`` (agents may not import bench); this
+glue adds what needs the bench: training episode seeds are checked with
+``check_training_seeds`` (test and dev seeds are refused), the periodic evaluation runs
+the smoothed policy on **dev** seeds through the runner, and the weights are written as
+a plain actor state_dict with a provenance record beside it (``<weights>.json``: the
+exact command, frames, wall time, git commit, config, final dev metrics).
+
+    swarmloc train mappo --frames 2000000 --seed 1 --weights-out agents/weights/mappo.pt
+    python -m swarmloc.bench.training.mappo --frames 400 --tasks CascadedFault-v0 --run-dir /tmp/run
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarmloc.agents.mappo_config import MappoConfig
+from swarmloc.bench.common.files import atomic_path, write_text_atomic
+from swarmloc.bench.common.provenance import source_commit
+from swarmloc.envs.seeds import DEV_SEED_START, check_training_seeds
+
+#: tasks and metric of the periodic dev evaluation (the issue-5 targets' metrics)
+EVAL_TASKS: dict[str, str] = {
+    "swarmloc/CascadedFault-v0": "healthy_rmse",
+    "swarmloc/NLOS-v0": "fault_rmse",
+    "swarmloc/Scale8-v0": "rmse",
+    "swarmloc/Ideal-v0": "rmse",
+}
+
+
+@dataclass
+class TrainMappoArgs(MappoConfig):
+    """Train MAPPO link trust on a task mixture (training seeds only; dev-seed evaluation)."""
+
+    weights_out: str = ""
+    """write the trained actor's state_dict here (+ ``.json`` provenance); default ``<run_dir>/mappo.pt``"""
+    eval_seeds: int = 4
+    """dev seeds per evaluation task (0 = no periodic evaluation)"""
+
+
+def command_line() -> str:
+    """The command that is running, as a user would type it."""
+    prog = Path(sys.argv[0]).name
+    if prog.endswith(".py"):
+        prog = f"python -m {__spec__.name if __spec__ else 'swarmloc.bench.training.mappo'}"
+    return " ".join([prog, *(shlex.quote(a) for a in sys.argv[1:])])
+
+
+#: the code a MAPPO training run depends on (its provenance is "dirty" if any of it changed)
+TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/mappo_nets.py", "agents/mappo_policy.py", "agents/smoothing.py",
+                 "bench/training/mappo.py")
+
+
+def dev_evaluator(n_seeds: int):
+    """An ``evaluate(policy)`` callback: smoothed policy on ``n_seeds`` dev seeds of ``EVAL_TASKS``.
+
+    Returns a function mapping an unsmoothed ``MappoPolicy`` to
+    ``{"<Task>/<metric>": value, "<Task>/<metric>_vs_uniform": ratio}`` (means over seeds).
+    """
+    from swarmloc.agents.registry import LoadedMethod, load_method
+    from swarmloc.agents.smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing
+    from swarmloc.bench.evaluation.runner import rollout
+    from swarmloc.envs.tasks import get_spec
+
+    seeds = list(range(DEV_SEED_START, DEV_SEED_START + n_seeds))
+    uniform: dict[str, float] = {}
+
+    def evaluate(policy) -> dict[str, float]:
+        method = MarkovSmoothing(policy, BETA_MAX, SMOOTHING_GAMMA)
+        loaded = LoadedMethod(name="mappo", entry_point="swarmloc.agents.mappo_policy:mappo", track="A",
+                              privileged=False, deterministic=True, method=method)
+        out: dict[str, float] = {}
+        for task, metric in EVAL_TASKS.items():
+            spec = get_spec(task)
+            name = task.removeprefix("swarmloc/")
+            values = [m[metric] for m in rollout(loaded, spec, seeds)[0]]
+            value = float(np.mean([v for v in values if v is not None]))
+            if task not in uniform:
+                base = [m[metric] for m in rollout(load_method("uniform"), spec, seeds)[0]]
+                uniform[task] = float(np.mean([v for v in base if v is not None]))
+            out[f"{name}/{metric}"] = value
+            out[f"{name}/{metric}_vs_uniform"] = value / max(uniform[task], 1e-9)
+        return out
+
+    return evaluate
+
+
+def train_mappo(config: TrainMappoArgs) -> Path:
+    """Train MAPPO link trust and write the weights and their provenance record.
+
+    Args:
+        config: a ``TrainMappoArgs`` (``MappoConfig`` plus ``weights_out``, ``eval_seeds``).
+
+    Returns:
+        The path of the written weights (a plain ``ChannelActor`` state_dict).
+
+    Raises:
+        ValueError: the run's seed or any episode seed is not a training seed.
+    """
+    import torch
+
+    from swarmloc.agents.mappo import train
+
+    check_training_seeds([config.seed])
+    evaluate = dev_evaluator(config.eval_seeds) if config.eval_seeds > 0 else None
+    started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
+    result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
+    out = Path(config.weights_out) if config.weights_out else Path(config.run_dir) / "mappo.pt"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out) as tmp:
+        torch.save(result.actor_state, tmp)
+    record = {
+        "method": "mappo-accuracy-only" if config.accuracy_only else "mappo",
+        "command": command_line(),
+        "frames": result.frames,
+        "iterations": result.iterations,
+        "wall_time_s": round(result.wall_time_s, 1),
+        "started": started,
+        "git_commit": commit,
+        "torch": torch.__version__,
+        "machine": f"{os.cpu_count()} CPU(s), {config.threads} thread(s)",
+        "episode_seeds": {"count": len(result.episode_seeds), "min": min(result.episode_seeds),
+                          "max": max(result.episode_seeds)},
+        "dev_eval": result.last_eval,
+        "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
+    }
+    meta = out.with_suffix(".json")
+    write_text_atomic(meta, json.dumps(record, indent=2) + "\n")
+    print(f"wrote {out} and {meta} ({result.frames} frames in {result.wall_time_s:.0f} s)")
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m swarmloc.bench.training.mappo [options]`` (the same options as ``swarmloc train mappo``)."""
+    import tyro
+
+    train_mappo(tyro.cli(TrainMappoArgs, args=argv))
+
+
+if __name__ == "__main__":
+    main()
