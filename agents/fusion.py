@@ -1,4 +1,4 @@
-"""Estimate fusion and χ² consistency tests (dtvirm §3.6–3.7, federated-filter §4).
+"""Estimate fusion and χ² consistency tests (dtvirm §3.6–3.7, federated §4).
 
 Pure, vectorized numpy in float64; every function broadcasts over leading dims ``...``
 (typically B envs, N UAVs). D is the state dimension, m a measurement dimension, S the

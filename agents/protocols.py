@@ -1,4 +1,4 @@
-"""Method protocols: the two ways a method takes part (DESIGN "Two ways to take part").
+"""Method protocols: the two ways a method takes part (docs/architecture.md, Track A and B).
 
 **Track A — link trust** (:class:`LinkTrustPolicy`). Each step the policy receives, for
 all B episodes at once, the per-channel observation ``(B, N, L, F)`` built by

@@ -11,7 +11,8 @@ fault is isolated within a step:
 with β_max = 0.85 and γ = 2.0 [1/m] (the paper's values) and, as in madrl Algorithm 1,
 α_eff(0) = 1 and r(0) = 0. The smoothed α_eff is what the CEKF applies. A channel whose
 measurement is absent keeps its α_eff and r: an absent measurement carries no news.
-Smoothing belongs to the method, not the environment (DESIGN), so it wraps any policy.
+Smoothing belongs to the method, not the environment (docs/architecture.md), so it wraps
+any policy.
 """
 
 from __future__ import annotations

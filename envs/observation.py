@@ -1,4 +1,4 @@
-"""Per-channel observation of the link-trust track (DESIGN "Two ways to take part").
+"""Per-channel observation of the link-trust track (docs/world.md, "What a Track A policy observes").
 
 Each channel gets F = 11 features, each in [0, 1]: innovation magnitude r, predicted
 distance d̂, previous applied trust, IMU jerk ‖u(k) − u(k−1)‖, normalised innovation

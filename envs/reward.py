@@ -1,4 +1,4 @@
-"""Standard reward v0 (DESIGN "Standard reward", madrl §2.2.3).
+"""Standard reward v0 (docs/reward.md; madrl §2.2.3, see docs/references.md).
 
 Per UAV i at step k: r = R_acc − λ1·P_delay − λ2·P_energy − λ3·P_jitter, λ = (10, 0.1, 5):
   R_acc    = exp(−‖p̂ − p‖² / (2σ_acc²)), σ_acc = 1 m;
@@ -84,3 +84,8 @@ def standard_reward(estimate: np.ndarray, truth: np.ndarray, applied: np.ndarray
                        energy_penalty=energy_penalty, jitter_penalty=jitter_penalty, flops=np.asarray(flops, float)
                        * np.ones_like(accuracy), delay_ms=1e3 * t_calc * np.ones_like(accuracy),
                        energy_j=profile.joules(flops) * np.ones_like(accuracy))
+
+
+def team_reward(terms: RewardTerms) -> np.ndarray:
+    """``(B,)`` team reward: the mean over UAVs of the per-UAV reward."""
+    return terms.reward.sum(axis=1) / terms.reward.shape[1]

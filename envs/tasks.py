@@ -1,7 +1,9 @@
 """The task catalogue: one frozen ``TaskSpec`` per registered ID.
 
-Parameters come from the papers in ``shared/papers`` (cited per task). UAV indices are
-0-based; where a paper numbers nodes from 1 the docstring of the task says so.
+Parameters come from the papers each task cites by short key ([madrl], [pf-nn], [dtvirm],
+[federated], [imm-arkf]; the real flight from the UTIL data set, [util]); the full
+citations are in docs/references.md. UAV indices are 0-based; where a paper numbers nodes
+from 1 the docstring of the task says so.
 """
 
 from __future__ import annotations
@@ -174,7 +176,9 @@ def gradual_fault() -> TaskSpec:
 def util_flight() -> TaskSpec:
     """The UTIL dataset's real Crazyflie flight ``twr-obs-log1``, replayed (not simulated).
 
-    One UAV, 8 UWB anchors (two-way ranging, ≈10 Hz each), IMU at 1 kHz, Vicon truth.
+    The UTIL data set [util] (docs/references.md) is not shipped; this repository's README
+    says how to import it. One UAV, 8 UWB anchors (two-way ranging, ≈10 Hz each), IMU at
+    1 kHz, Vicon truth.
     Scored from take-off (log time 9.15 s) to landing (59.62 s): the README's airborne
     window, which the truth altitude reproduces (``util_flight.airborne_window``). The
     anchor positions come from the data folder at run time; the spec holds one placeholder

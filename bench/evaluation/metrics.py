@@ -1,4 +1,4 @@
-"""Per-episode metrics (DESIGN "Metrics"): small pure functions, one per metric.
+"""Per-episode metrics (docs/scoring.md): small pure functions, one per metric.
 
 Every metric is computed on the task's *scored nodes* (``spec.scored_nodes``) and
 *scored interval* (steps with ``t ≥ spec.scoring.start``), from the position error
