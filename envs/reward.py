@@ -84,4 +84,3 @@ def standard_reward(estimate: np.ndarray, truth: np.ndarray, applied: np.ndarray
                        energy_penalty=energy_penalty, jitter_penalty=jitter_penalty, flops=np.asarray(flops, float)
                        * np.ones_like(accuracy), delay_ms=1e3 * t_calc * np.ones_like(accuracy),
                        energy_j=profile.joules(flops) * np.ones_like(accuracy))
-
