@@ -10,7 +10,6 @@ from __future__ import annotations
 import io
 import re
 import tokenize
-import tomllib
 from pathlib import Path
 
 import pytest
@@ -201,7 +200,9 @@ def test_task_table_matches_the_catalogue():
 
 def test_citation_cff_describes_this_package():
     cff = (ROOT / "CITATION.cff").read_text(encoding="utf-8")
-    version = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["version"]
+    # the [project] table's version (tomllib needs Python 3.11; the package supports 3.10)
+    project = (ROOT / "pyproject.toml").read_text(encoding="utf-8").split("[project]", 1)[1].split("\n[", 1)[0]
+    version = re.search(r'^version\s*=\s*"([^"]+)"', project, re.M).group(1)
     fields = dict(re.findall(r"^([a-z-]+):[ \t]*(\S.*)?$", cff, re.M))
     assert fields["cff-version"] == "1.2.0"
     assert fields["version"] == version
