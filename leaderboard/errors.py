@@ -28,6 +28,13 @@ class VerificationFailed(SubmissionError):
         self.report = report
 
 
+class SandboxUnavailable(SubmissionError):
+    """Submitted code cannot be isolated here (no bubblewrap, no user namespaces, not Linux).
+
+    The message names the tool, what is missing, and the ``--no-sandbox`` opt-in.
+    """
+
+
 class DuplicateSubmission(SubmissionError):
     """The same method (by hash) is already on the leaderboard for this suite."""
 
@@ -39,6 +46,7 @@ class StoreError(Exception):
 __all__ = [
     "DuplicateSubmission",
     "InvalidSubmission",
+    "SandboxUnavailable",
     "StoreError",
     "SubmissionError",
     "VerificationFailed",

@@ -23,6 +23,7 @@ import hashlib
 import json
 import math
 import re
+import shlex
 import unicodedata
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -74,6 +75,9 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
     "normalized_score": (-math.inf, math.inf),
 }
 """Closed physical range of every metric (non-finite values are always rejected)."""
+
+SUBSET_SUFFIX: str = "-subset"
+"""Name suffix of a suite restricted to some of its tasks (``bench.evaluation.suites.restrict_tasks``)."""
 
 REQUIRED_METRICS: tuple[str, ...] = ("rmse",)
 """Metrics every episode must define (the rest may be null)."""
@@ -270,6 +274,38 @@ def _file_size(path: Path, what: str, limit: int) -> None:
         raise InvalidSubmission(f"{what} {path} is {size} bytes; the limit is {limit} bytes")
 
 
+def _read_bytes(path: Path, limits: SizeLimits) -> bytes:
+    _file_size(path, "results file", limits.results_bytes)
+    return path.read_bytes()
+
+
+def _parse(raw: bytes, path: Path) -> Results:
+    try:
+        return parse_results(raw, source=str(path))
+    except ResultsFileError as err:
+        raise InvalidSubmission(str(err)) from None
+
+
+def read_results(path: str | Path, limits: SizeLimits = SizeLimits()) -> Results:
+    """Parse a results file within the size limit, refusing it as :class:`InvalidSubmission`."""
+    return _parse(_read_bytes(Path(path), limits), Path(path))
+
+
+def _refuse_subset(results: Results, path: Path) -> None:
+    """Refuse results of ``swarmloc evaluate --tasks`` (suite ``<name>-subset``), saying what to run."""
+    name = results.suite.name
+    if not name.endswith(SUBSET_SUFFIX):
+        return
+    whole = name[: -len(SUBSET_SUFFIX)]
+    tasks = sorted({episode.task for episode in results.episodes})
+    raise InvalidSubmission(
+        f"results file {path} covers {len(tasks)} task(s) of suite {whole!r} (suite {name!r}, "
+        f"from `swarmloc evaluate --tasks`); only whole suites can be submitted. Evaluate the whole "
+        f"suite: swarmloc evaluate --method {shlex.quote(results.method.entry_point)} --suite "
+        f"{shlex.quote(whole)} --out {shlex.quote(path.name)}"
+    )
+
+
 def metric_problems(results: Results) -> list[str]:
     """Every non-finite, missing or out-of-range metric value, one line each."""
     problems: list[str] = []
@@ -363,14 +399,11 @@ def validate_submission(
     """
     lookup = suite_lookup or default_suite_lookup
     path = submission.results_path
-    _file_size(path, "results file", limits.results_bytes)
     if submission.weights_path is not None:
         _file_size(submission.weights_path, "weights file", limits.weights_bytes)
-    raw = path.read_bytes()
-    try:
-        results = parse_results(raw, source=str(path))
-    except ResultsFileError as err:
-        raise InvalidSubmission(str(err)) from None
+    raw = _read_bytes(path, limits)
+    results = _parse(raw, path)
+    _refuse_subset(results, path)
     entry = parse_entry_point(submission.entry_point)
     meta = submission.metadata
     problems: list[str] = []
@@ -389,7 +422,12 @@ def validate_submission(
     weights_sha = None
     if submission.weights_path is not None:
         weights_sha = sha256_file(submission.weights_path)
-    if weights_sha != results.method.weights_sha256:
+    if weights_sha is None and results.method.weights_sha256 is not None:
+        problems.append(
+            f"the results were produced with a weights file (SHA-256 {results.method.weights_sha256}) "
+            f"but none was given; pass the file given to `swarmloc evaluate --weights` as --weights"
+        )
+    elif weights_sha != results.method.weights_sha256:
         problems.append(
             f"weights file SHA-256 {weights_sha} differs from the results' "
             f"method.weights_sha256 {results.method.weights_sha256}"
@@ -458,6 +496,7 @@ __all__ = [
     "METRIC_BOUNDS",
     "REQUIRED_METRICS",
     "SUBMISSION_VERSION",
+    "SUBSET_SUFFIX",
     "SizeLimits",
     "Submission",
     "SubmissionMetadata",
@@ -469,5 +508,6 @@ __all__ = [
     "make_submission",
     "method_hash",
     "metric_problems",
+    "read_results",
     "validate_submission",
 ]

@@ -125,8 +125,11 @@ class LeaderboardStore:
         except Exception as err:  # sqlalchemy raises ArgumentError
             raise StoreError(f"invalid database URL {raw!r}: {err}") from None
         self._is_sqlite = url.get_backend_name() == "sqlite"
+        self.database_file: Path | None = None
+        """The SQLite file (None for other databases and in-memory SQLite)."""
         if self._is_sqlite and url.database not in (None, "", ":memory:"):
-            Path(url.database).expanduser().parent.mkdir(parents=True, exist_ok=True)
+            self.database_file = Path(url.database).expanduser().resolve()
+            self.database_file.parent.mkdir(parents=True, exist_ok=True)
         try:
             self._engine = create_engine(url)
         except Exception as err:  # missing driver, bad options

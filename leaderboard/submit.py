@@ -21,6 +21,7 @@ from swarmloc.leaderboard.schema import (
     SuiteLookup,
     ValidatedSubmission,
     make_submission,
+    read_results,
     validate_submission,
 )
 from swarmloc.leaderboard.store import (
@@ -118,10 +119,33 @@ def build_entry(
     )
 
 
+def metadata_from_results(results_path: str | Path, overrides: SubmissionMetadata | dict[str, Any] | None = None,
+                          size_limits: SizeLimits = SizeLimits()) -> dict[str, Any]:
+    """Submission metadata: the results file's method name, track and privileged flag, then ``overrides``.
+
+    Args:
+        results_path: Results file written by ``swarmloc evaluate``.
+        overrides: Fields given by the submitter (a :class:`SubmissionMetadata` or a
+            dict; ``None`` values are ignored).
+        size_limits: Largest results file read.
+
+    Returns:
+        A dict of :class:`SubmissionMetadata` fields (validated later, with the rest).
+
+    Raises:
+        InvalidSubmission: the results file is missing, too large or unreadable.
+    """
+    method = read_results(results_path, size_limits).method
+    given = overrides.model_dump() if isinstance(overrides, SubmissionMetadata) else dict(overrides or {})
+    fields = {"name": method.name, "track": method.track, "privileged": method.privileged}
+    fields |= {key: value for key, value in given.items() if value is not None}
+    return fields
+
+
 def submit(
     results_path: str | Path,
-    entry_point: str,
-    metadata: SubmissionMetadata | dict[str, Any],
+    entry_point: str | None = None,
+    metadata: SubmissionMetadata | dict[str, Any] | None = None,
     weights: str | Path | None = None,
     db_url: str | None = None,
     trust: bool = False,
@@ -133,6 +157,7 @@ def submit(
     tolerance: Tolerance | None = None,
     size_limits: SizeLimits = SizeLimits(),
     search_path: Sequence[str | Path] = (),
+    sandbox: bool = True,
     runner: str = DEFAULT_RUNNER,
     runner_path: Sequence[str | Path] = (),
     suite_lookup: SuiteLookup | None = None,
@@ -142,21 +167,26 @@ def submit(
 
     Args:
         results_path: Results file written by ``swarmloc evaluate``.
-        entry_point: The method (``package.module:factory``, ``path/file.py:factory`` or
-            a registered name); must match the results file.
+        entry_point: The method (``package.module:factory``, ``path/to/file.py:factory`` or
+            a registered name); default: the results file's ``method.entry_point``.
         metadata: Name, authors, URL, description, track, privileged (a
-            :class:`SubmissionMetadata` or a dict of its fields).
-        weights: Optional weights file; its SHA-256 must match the results.
+            :class:`SubmissionMetadata` or a dict of some of its fields); name, track and
+            privileged default to the results file's method.
+        weights: Weights file; its SHA-256 must match the results (required when the
+            results record one).
         db_url: Store URL (default: ``SWARMLOC_DB`` or the user data directory).
         trust: Skip verification; only allowed for the shipped reference methods
             (:data:`~swarmloc.leaderboard.store.SHIPPED_REFERENCE_METHODS`).
         sample_frac: Fraction of episodes to re-run, in (0, 1].
         min_episodes: Re-run at least this many episodes.
         sample_seed: Sampler seed (fresh random one when None; recorded in the store).
-        limits: Wall-time and memory limits of the verification worker.
+        limits: Wall-time, memory, process and file-size limits of the re-run.
         tolerance: Override the comparison tolerance.
         size_limits: Largest results and weights files accepted.
-        search_path: Directories the method's modules are imported from.
+        search_path: Directories the method's modules are imported from (visible,
+            read-only, to the method's sandbox).
+        sandbox: Re-run inside bubblewrap (see :mod:`swarmloc.leaderboard.sandbox`);
+            False runs your own method with the limits only, where bubblewrap is missing.
         runner: ``module:function`` the verification worker calls.
         runner_path: Extra directories for the worker's ``PYTHONPATH`` (runner code).
         suite_lookup: ``name -> suite`` (default ``swarmloc.bench.evaluation.suites.get_suite``).
@@ -167,11 +197,15 @@ def submit(
 
     Raises:
         InvalidSubmission: malformed metadata, files too large, results not matching
-            the suite, bad metrics, or ``trust`` for a non-shipped method.
+            the suite (or of a task subset), bad metrics, or ``trust`` for a non-shipped method.
+        SandboxUnavailable: ``sandbox`` is True and bubblewrap cannot run here.
         VerificationFailed: the re-run crashed, timed out, ran out of memory, or
             did not reproduce the submitted metrics.
         DuplicateSubmission: the same method is already stored for this suite.
     """
+    if entry_point is None:
+        entry_point = read_results(results_path, size_limits).method.entry_point
+    metadata = metadata_from_results(results_path, metadata, size_limits)
     submission = make_submission(results_path, entry_point, metadata, weights, search_path)
     if trust and entry_point not in SHIPPED_REFERENCE_METHODS:
         raise InvalidSubmission(
@@ -197,7 +231,10 @@ def submit(
                 limits=limits,
                 tolerance=tolerance,
                 runner=runner,
-                pythonpath=[*search_path, *runner_path],
+                runner_path=runner_path,
+                method_path=search_path,
+                sandbox=sandbox,
+                store_file=active.database_file,
             )
         entry = build_entry(validated, report, trusted=trust)
         new_id = active.add(entry)
@@ -208,4 +245,4 @@ def submit(
             active.close()
 
 
-__all__ = ["SubmissionReceipt", "build_entry", "submit"]
+__all__ = ["SubmissionReceipt", "build_entry", "metadata_from_results", "submit"]

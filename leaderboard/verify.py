@@ -1,49 +1,32 @@
-"""Verification: re-run a random sample of submitted episodes in a sandboxed subprocess.
+"""Verification: re-run a random sample of submitted episodes in a sandbox.
 
 The sample (default 10 % of the episodes, at least 3) is drawn with a seeded sampler;
 the seed is fresh per submission unless given, and recorded so that a verification can
-be repeated. The episodes run in ``python -m swarmloc.leaderboard.verify_worker``:
-
-* a **clean environment** (``PATH``, a private temporary ``HOME``/``TMPDIR``, locale,
-  ``PYTHONPATH`` for the method's search path): no ``SWARMLOC_DB``, no store URL;
-* a **memory limit**: the worker sets ``RLIMIT_AS`` on itself before importing the method;
-* a **wall-time limit**: the worker's whole process group is killed when it runs over.
+be repeated. The episodes run in :mod:`swarmloc.leaderboard.rerun`: the runner in one
+bubblewrap sandbox, the submitted method in another, each with a read-only view of
+swarmloc and its own files only, a private tmp, no network, its own PID namespace, and
+memory, process, file-size and wall-time limits (see :mod:`swarmloc.leaderboard.sandbox`).
 
 Per-episode metrics must equal the submitted ones exactly for methods that declare
 themselves deterministic, and agree within :data:`NONDETERMINISTIC_TOLERANCE` otherwise.
-
-This isolates the store from honest mistakes and keeps runaway methods bounded; it is
-not a security boundary against hostile code, which needs a container or VM around it.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import random
 import secrets
-import signal
-import subprocess
-import sys
-import tempfile
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
-from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import VerificationFailed
+from swarmloc.leaderboard.rerun import VerifyLimits, run_in_worker, worker_environment
 
 DEFAULT_RUNNER: str = "swarmloc.bench.evaluation.runner:run_episodes"
 """``module:function`` the worker calls as ``run_episodes(method, episodes) -> list[dict]``."""
 
-WORKER_MODULE: str = "swarmloc.leaderboard.verify_worker"
-
-_EXIT_MEMORY = 3
-_MAX_RESPONSE_BYTES = 64 * 1024 * 1024
-_LOG_TAIL_CHARS = 2000
 _MAX_REPORTED_MISMATCHES = 20
 
 
@@ -74,25 +57,6 @@ EXACT = Tolerance()
 
 NONDETERMINISTIC_TOLERANCE = Tolerance(rel=1e-3, abs=1e-6)
 """Methods declared non-deterministic must agree to 0.1 % (or 1e-6 absolute)."""
-
-
-@dataclass(frozen=True)
-class VerifyLimits:
-    """Resources the verification worker may use.
-
-    Attributes:
-        wall_time_s: Wall-clock seconds for the whole sample (start-up included).
-        memory_bytes: Address-space cap (``RLIMIT_AS``) of the worker process.
-    """
-
-    wall_time_s: float = 900.0
-    memory_bytes: int = 8 * 1024**3
-
-    def __post_init__(self) -> None:
-        if not self.wall_time_s > 0:
-            raise ValueError(f"wall_time_s must be positive, got {self.wall_time_s}")
-        if self.memory_bytes < 64 * 1024**2:
-            raise ValueError(f"memory_bytes must be at least 64 MiB, got {self.memory_bytes}")
 
 
 @dataclass(frozen=True)
@@ -178,145 +142,6 @@ def sample_episodes(
     return sorted(random.Random(seed).sample(pool, size))
 
 
-def worker_environment(home: Path, pythonpath: Sequence[str]) -> dict[str, str]:
-    """The complete environment of the worker: nothing inherited but ``PATH``."""
-    env = {
-        "PATH": os.environ.get("PATH", os.defpath),
-        "HOME": str(home),
-        "TMPDIR": str(home),
-        "LANG": "C.UTF-8",
-        "LC_ALL": "C.UTF-8",
-        "PYTHONHASHSEED": "0",
-        "PYTHONDONTWRITEBYTECODE": "1",
-        "PYTHONNOUSERSITE": "1",
-        # glibc reserves 64 MiB of address space per thread arena; keep RLIMIT_AS meaningful.
-        "MALLOC_ARENA_MAX": "2",
-    }
-    if pythonpath:
-        env["PYTHONPATH"] = os.pathsep.join(pythonpath)
-    return env
-
-
-def _tail(path: Path) -> str:
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return ""
-    return text[-_LOG_TAIL_CHARS:].strip()
-
-
-def _signal_name(code: int) -> str:
-    try:
-        return signal.Signals(-code).name
-    except ValueError:
-        return f"signal {-code}"
-
-
-def run_in_worker(
-    method: str,
-    episodes: Sequence[tuple[str, int]],
-    *,
-    weights: Path | None = None,
-    runner: str = DEFAULT_RUNNER,
-    pythonpath: Sequence[str | Path] = (),
-    limits: VerifyLimits = VerifyLimits(),
-    python: str = sys.executable,
-) -> tuple[list[dict], float]:
-    """Run episodes in the sandboxed worker and return its per-episode results.
-
-    Args:
-        method: Entry point as in the results file (file entry points are rewritten to
-            ``stem:factory`` with their directory on the worker's path).
-        episodes: (task, seed) pairs to run.
-        weights: Weights file handed to the runner as ``weights=``.
-        runner: ``module:function`` the worker calls.
-        pythonpath: Directories for the worker's ``PYTHONPATH`` (method and runner code).
-        limits: Wall-time and memory limits.
-        python: Interpreter for the worker.
-
-    Returns:
-        ``(episodes, wall_seconds)`` where each episode is ``{"task", "seed", "metrics"}``.
-
-    Raises:
-        VerificationFailed: when the worker crashes, runs out of time or memory, or
-            returns malformed output; the message carries the worker's error.
-    """
-    runner_method, extra_path = parse_entry_point(method).for_runner()
-    with tempfile.TemporaryDirectory(prefix="swarmloc-verify-") as tmp:
-        home = Path(tmp)
-        request_path, response_path = home / "request.json", home / "response.json"
-        stdout_path, stderr_path = home / "stdout.log", home / "stderr.log"
-        request = {
-            "runner": runner,
-            "method": runner_method,
-            "weights": str(Path(weights).resolve()) if weights is not None else None,
-            "sys_path": extra_path,
-            "episodes": [[task, seed] for task, seed in episodes],
-        }
-        request_path.write_text(json.dumps(request), encoding="utf-8")
-        command = [
-            python, "-m", WORKER_MODULE,
-            "--request", str(request_path),
-            "--response", str(response_path),
-            "--memory-bytes", str(limits.memory_bytes),
-        ]
-        env = worker_environment(home, [str(Path(p).resolve()) for p in pythonpath])
-        started = time.monotonic()
-        with open(stdout_path, "wb") as out, open(stderr_path, "wb") as err:
-            proc = subprocess.Popen(
-                command, cwd=home, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
-                start_new_session=True,
-            )
-            try:
-                code = proc.wait(timeout=limits.wall_time_s)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-                raise VerificationFailed(
-                    f"method {method!r} exceeded the wall-time limit of {limits.wall_time_s:g} s "
-                    f"while re-running {len(episodes)} episode(s); the worker was killed"
-                ) from None
-            finally:
-                if proc.poll() is None:  # pragma: no cover - only on unexpected errors
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait()
-        wall = time.monotonic() - started
-        # Reap grandchildren the method may have left behind.
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        response = None
-        if response_path.is_file() and response_path.stat().st_size <= _MAX_RESPONSE_BYTES:
-            try:
-                response = json.loads(response_path.read_text(encoding="utf-8"))
-            except (json.JSONDecodeError, UnicodeDecodeError):
-                response = None
-        mib = limits.memory_bytes / 1024**2
-        if code == 0 and isinstance(response, dict) and response.get("ok"):
-            return list(response.get("episodes", [])), wall
-        if isinstance(response, dict) and response.get("kind") == "memory" or code == _EXIT_MEMORY:
-            detail = response.get("message") if isinstance(response, dict) else None
-            raise VerificationFailed(
-                f"method {method!r} exceeded the memory limit of {mib:.0f} MiB "
-                f"while re-running {len(episodes)} episode(s)"
-                + (f" ({detail})" if detail else "")
-            )
-        if isinstance(response, dict) and not response.get("ok", True):
-            detail = response.get("traceback") or response.get("message") or ""
-            what = "returned malformed output" if response.get("kind") == "bad_output" else "crashed"
-            raise VerificationFailed(
-                f"method {method!r} {what} during verification: {response.get('message')}\n"
-                f"{detail}".rstrip()
-            )
-        how = f"died with {_signal_name(code)}" if code < 0 else f"exited with status {code}"
-        hint = f" (possibly the memory limit of {mib:.0f} MiB)" if code < 0 else ""
-        raise VerificationFailed(
-            f"verification worker for method {method!r} {how}{hint} without a result; "
-            f"stderr:\n{_tail(stderr_path) or '(empty)'}"
-        )
-
-
 def compare_episodes(
     results: Results, recomputed: Sequence[dict], sample: Sequence[tuple[str, int]],
     tolerance: Tolerance,
@@ -348,7 +173,10 @@ def verify_results(
     limits: VerifyLimits = VerifyLimits(),
     tolerance: Tolerance | None = None,
     runner: str = DEFAULT_RUNNER,
-    pythonpath: Sequence[str | Path] = (),
+    runner_path: Sequence[str | Path] = (),
+    method_path: Sequence[str | Path] = (),
+    sandbox: bool = True,
+    store_file: Path | None = None,
 ) -> VerificationReport:
     """Re-run a sample of the submitted episodes and compare their metrics.
 
@@ -359,23 +187,28 @@ def verify_results(
         sample_frac: Fraction of episodes to re-run, in (0, 1].
         min_episodes: Lower bound on the sample size.
         sample_seed: Sampler seed; a fresh random one when None (recorded in the report).
-        limits: Worker wall-time and memory limits.
+        limits: Wall-time, memory, process and file-size limits.
         tolerance: Override; by default exact for deterministic methods, else
             :data:`NONDETERMINISTIC_TOLERANCE`.
         runner: ``module:function`` the worker calls.
-        pythonpath: Directories for the worker's ``PYTHONPATH``.
+        runner_path: Directories on the worker's ``PYTHONPATH`` (runner code).
+        method_path: Directories on the method's ``PYTHONPATH`` (its modules).
+        sandbox: Run inside bubblewrap; False runs plain subprocesses with the limits only.
+        store_file: The store's SQLite file, kept out of the sandbox's view.
 
     Returns:
         The report (``report.ok`` is True).
 
     Raises:
+        SandboxUnavailable: ``sandbox`` is True and bubblewrap cannot run here.
         VerificationFailed: on a worker failure or any mismatch, with the report text.
     """
     seed = secrets.randbits(63) if sample_seed is None else sample_seed
     sample = sample_episodes(results.episode_keys(), sample_frac, min_episodes, seed)
     tol = tolerance or (EXACT if results.method.deterministic else NONDETERMINISTIC_TOLERANCE)
     recomputed, wall = run_in_worker(
-        entry_point, sample, weights=weights, runner=runner, pythonpath=pythonpath, limits=limits
+        entry_point, sample, weights=weights, runner=runner, runner_path=runner_path,
+        method_path=method_path, limits=limits, sandbox=sandbox, store_file=store_file,
     )
     report = VerificationReport(
         sample_seed=seed,
@@ -403,4 +236,5 @@ __all__ = [
     "run_in_worker",
     "sample_episodes",
     "verify_results",
+    "worker_environment",
 ]

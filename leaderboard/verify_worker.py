@@ -1,39 +1,50 @@
-"""Sandboxed re-run of submitted episodes: ``python -m swarmloc.leaderboard.verify_worker``.
+"""Re-run of submitted episodes inside the sandbox: ``python -m swarmloc.leaderboard.verify_worker``.
 
-Started by :mod:`swarmloc.leaderboard.verify` in a fresh process with a clean
-environment (no store URL, a private temporary HOME). It caps its own address space
-with ``RLIMIT_AS`` *before* importing anything of the method, reads a JSON request,
-calls the runner, and writes a JSON response:
+Started by :mod:`swarmloc.leaderboard.verify` inside bubblewrap (see
+:mod:`swarmloc.leaderboard.sandbox`) with a clean environment. Before importing anything
+of the runner or the method it caps its own resources (:func:`apply_limits`: address
+space, processes, file size, no core dumps), then reads a JSON request from standard
+input, calls the runner, and writes a JSON response to the file descriptor
+``--response-fd`` — a pipe to the parent that no other process in the sandbox holds:
 
 request::
 
     {"runner": "module:function", "method": "<entry point>", "weights": path | null,
-     "sys_path": [dirs], "episodes": [[task, seed], ...]}
+     "sys_path": [dirs], "episodes": [[task, seed], ...],
+     "numba_cache_sources": [dirs], "method_channel": {"read_fd": int, "write_fd": int} | null}
 
 response::
 
     {"ok": true, "episodes": [{"task", "seed", "metrics": {...}}, ...]}
     {"ok": false, "kind": "memory" | "exception" | "bad_output", "message": str, "traceback": str}
 
+When ``method_channel`` is given, the submitted method is not imported here: it runs in
+a sandbox of its own (:mod:`swarmloc.leaderboard.method_process`) and the runner gets a
+stand-in that forwards every call over the channel, so the method can neither patch the
+runner nor forge this response.
+
 The runner is called as ``runner(method, episodes)`` (plus ``weights=path`` when a weights
 file was submitted) and must return one ``{"task", "seed", "metrics"}`` mapping per episode.
 
 Exit codes: 0 success, 2 bad invocation, 3 memory limit exceeded, 4 the runner or method
 raised, 5 the runner returned malformed output. Only the standard library is imported
-here, so the limit applies to the method, not to the worker.
+at start-up, so the limits apply to the method and runner, not to the worker's own set-up.
 """
 
 from __future__ import annotations
 
 import argparse
 import errno
+import hashlib
 import importlib
 import json
 import os
 import resource
+import shutil
 import sys
 import traceback
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 EXIT_OK = 0
@@ -49,9 +60,47 @@ class BadOutput(Exception):
     """The runner returned something that is not a list of episode results."""
 
 
+def apply_limits(memory_bytes: int, max_processes: int = 0, max_file_bytes: int = 0) -> None:
+    """Cap this process and its children (soft and hard limits; 0 leaves one unset).
+
+    Args:
+        memory_bytes: Address space (``RLIMIT_AS``).
+        max_processes: Processes and threads of this user in the sandbox (``RLIMIT_NPROC``).
+        max_file_bytes: Largest file any write may grow, standard output included
+            (``RLIMIT_FSIZE``; Python ignores ``SIGXFSZ``, so writes fail with ``EFBIG``).
+    """
+    if memory_bytes > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+    if max_processes > 0:
+        resource.setrlimit(resource.RLIMIT_NPROC, (max_processes, max_processes))
+    if max_file_bytes > 0:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (max_file_bytes, max_file_bytes))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+
+
 def limit_memory(max_bytes: int) -> None:
     """Cap this process's address space (soft and hard) at ``max_bytes``."""
-    resource.setrlimit(resource.RLIMIT_AS, (max_bytes, max_bytes))
+    apply_limits(max_bytes)
+
+
+def seed_numba_cache(sources: Sequence[str], cache_dir: str) -> None:
+    """Copy numba's on-disk caches of ``sources`` into ``cache_dir`` (``NUMBA_CACHE_DIR``).
+
+    Inside the sandbox the source folders are read-only, so numba cannot use their
+    ``__pycache__``; copying the index and data files to where ``NUMBA_CACHE_DIR`` points
+    (numba's layout: ``<folder name>_<sha1 of the folder path>``) saves recompiling every
+    kernel. Files are copied one way only: nothing the sandbox writes reaches the host.
+    """
+    for source in sources:
+        pycache = Path(source) / "__pycache__"
+        if not pycache.is_dir():
+            continue
+        sub = f"{Path(source).name}_{hashlib.sha1(str(source).encode()).hexdigest()}"
+        target = Path(cache_dir) / sub
+        target.mkdir(parents=True, exist_ok=True)
+        for item in pycache.iterdir():
+            if item.suffix in (".nbi", ".nbc"):
+                shutil.copy2(item, target / item.name)
 
 
 def load_callable(spec: str) -> Any:
@@ -125,13 +174,6 @@ def is_out_of_memory(err: BaseException) -> bool:
     return False
 
 
-def _write(path: str, payload: Mapping[str, Any]) -> None:
-    tmp = f"{path}.tmp"
-    with open(tmp, "w", encoding="utf-8") as handle:
-        json.dump(payload, handle, allow_nan=True)
-    os.replace(tmp, path)
-
-
 def _failure(kind: str, err: BaseException) -> dict[str, Any]:
     text = "".join(traceback.format_exception(err))
     return {
@@ -146,10 +188,22 @@ def run(request: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Call the requested runner on the requested episodes and normalize its output."""
     for entry in reversed(request.get("sys_path", [])):
         sys.path.insert(0, str(entry))
+    method = request["method"]
+    channel = request.get("method_channel")
+    if channel:
+        from swarmloc.leaderboard.method_process import install_remote_method
+
+        method = install_remote_method(method, int(channel["read_fd"]), int(channel["write_fd"]))
     runner = load_callable(request["runner"])
     episodes = [(str(task), int(seed)) for task, seed in request["episodes"]]
     kwargs = {"weights": request["weights"]} if request.get("weights") else {}
-    output = runner(request["method"], episodes, **kwargs)
+    try:
+        output = runner(method, episodes, **kwargs)
+    finally:
+        if channel:
+            from swarmloc.leaderboard.method_process import close_remote_methods
+
+            close_remote_methods()
     try:
         items = list(output)
     except TypeError:
@@ -157,29 +211,39 @@ def run(request: Mapping[str, Any]) -> list[dict[str, Any]]:
     return [normalize_episode(item) for item in items]
 
 
+def _respond(fd: int, payload: Mapping[str, Any]) -> None:
+    data = json.dumps(payload, allow_nan=True).encode("utf-8")
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+    os.close(fd)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the worker process; see the module docstring."""
     parser = argparse.ArgumentParser(prog="python -m swarmloc.leaderboard.verify_worker")
-    parser.add_argument("--request", required=True, help="JSON request file")
-    parser.add_argument("--response", required=True, help="where to write the JSON response")
+    parser.add_argument("--response-fd", type=int, required=True, help="pipe for the JSON response")
     parser.add_argument("--memory-bytes", type=int, default=0, help="RLIMIT_AS cap (0: none)")
+    parser.add_argument("--max-processes", type=int, default=0, help="RLIMIT_NPROC cap (0: none)")
+    parser.add_argument("--max-file-bytes", type=int, default=0, help="RLIMIT_FSIZE cap (0: none)")
     args = parser.parse_args(argv)
-    if args.memory_bytes > 0:
-        limit_memory(args.memory_bytes)
-    with open(args.request, encoding="utf-8") as handle:
-        request = json.load(handle)
+    apply_limits(args.memory_bytes, args.max_processes, args.max_file_bytes)
+    request = json.loads(sys.stdin.buffer.read())
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR")
+    if cache_dir and request.get("numba_cache_sources"):
+        seed_numba_cache(request["numba_cache_sources"], cache_dir)
     try:
         episodes = run(request)
     except BadOutput as err:
-        _write(args.response, _failure("bad_output", err))
+        _respond(args.response_fd, _failure("bad_output", err))
         return EXIT_BAD_OUTPUT
     except BaseException as err:  # noqa: BLE001 - any failure of submitted code is reported
         if is_out_of_memory(err):
-            _write(args.response, _failure("memory", err))
+            _respond(args.response_fd, _failure("memory", err))
             return EXIT_MEMORY
-        _write(args.response, _failure("exception", err))
+        _respond(args.response_fd, _failure("exception", err))
         return EXIT_EXCEPTION
-    _write(args.response, {"ok": True, "episodes": episodes})
+    _respond(args.response_fd, {"ok": True, "episodes": episodes})
     return EXIT_OK
 
 

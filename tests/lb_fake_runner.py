@@ -1,20 +1,26 @@
 """A stand-in for ``swarmloc.bench.evaluation.runner.run_episodes`` used by the leaderboard tests.
 
-Standard library only (it runs inside the verification worker). Metrics are a pure
-function of (task, seed). The method's factory name selects a behaviour:
+Standard library only. Metrics are a pure function of (task, seed). Like the real
+runner it builds the method by calling its factory — during verification that call goes
+to the method's own sandbox (``swarmloc.leaderboard.method_process``) — so the
+factory's name selects a behaviour, run where the submitted code runs:
 
-* ``...:good*``  — return the deterministic metrics;
-* ``...:crash``  — raise inside the method;
-* ``...:sleep``  — sleep far past any test time limit;
-* ``...:oom``    — allocate far past any test memory limit;
-* ``...:envcheck`` — fail unless the worker's environment is clean (no store URL).
+* ``good*``    — a method that does nothing; the runner returns the deterministic metrics;
+* ``crash``    — raise inside the method;
+* ``sleep``    — sleep far past any test time limit;
+* ``oom``      — allocate far past any test memory limit;
+* ``envcheck`` — fail unless the method's environment is clean (no store URL).
+
+The runner itself also refuses to run with a store URL in its environment.
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib
 import os
 import time
+from typing import Any
 
 
 def metrics_for(task: str, seed: int) -> dict[str, float | None]:
@@ -41,18 +47,52 @@ def metrics_for(task: str, seed: int) -> dict[str, float | None]:
     }
 
 
+class Idle:
+    """A Track A method that never runs a step (the fake runner computes nothing)."""
+
+    def reset(self, batch_size: int, layout: Any, keys: Any) -> None:
+        """Nothing to reset."""
+
+    def act(self, inp: Any) -> None:
+        """Never called."""
+
+
+def _leaked() -> list[str]:
+    return sorted(k for k in os.environ if k.startswith("SWARMLOC") or k == "LEAK_CANARY")
+
+
+def crash() -> Idle:
+    raise RuntimeError("simulated crash inside the method")
+
+
+def sleep() -> Idle:
+    time.sleep(120)
+    return Idle()
+
+
+def oom() -> Idle:
+    hog = bytearray(8 * 1024**3)
+    raise AssertionError(f"allocated {len(hog)} bytes despite the memory limit")
+
+
+def envcheck() -> Idle:
+    if _leaked():
+        raise RuntimeError(f"the method's process inherited {_leaked()}")
+    return Idle()
+
+
+def __getattr__(name: str) -> Any:
+    if name.startswith("good"):
+        return Idle
+    raise AttributeError(f"module 'lb_fake_runner' has no attribute {name!r}")
+
+
 def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | None = None) -> list[dict]:
-    """Re-run ``episodes`` of ``method`` (see the module docstring for behaviours)."""
-    behaviour = method.rpartition(":")[2]
-    if behaviour == "crash":
-        raise RuntimeError("simulated crash inside the method")
-    if behaviour == "sleep":
-        time.sleep(120)
-    if behaviour == "envcheck":
-        leaked = sorted(k for k in os.environ if k.startswith("SWARMLOC") or k == "LEAK_CANARY")
-        if leaked:
-            raise RuntimeError(f"the worker inherited {leaked}")
-    if behaviour == "oom":
-        hog = bytearray(8 * 1024**3)
-        return [{"task": "never", "seed": len(hog), "metrics": {}}]
+    """Build the method through its factory, then return the metrics of ``episodes``."""
+    if _leaked():
+        raise RuntimeError(f"the verification worker inherited {_leaked()}")
+    module_name, sep, attr = method.partition(":")
+    if sep:  # registered names are shipped methods: nothing to build here
+        factory = getattr(importlib.import_module(module_name), attr)
+        factory(weights=weights) if weights else factory()
     return [{"task": t, "seed": s, "metrics": metrics_for(t, s)} for t, s in episodes]

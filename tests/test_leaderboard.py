@@ -178,15 +178,15 @@ REJECTIONS: dict[str, tuple[dict[str, Any], dict[str, Any], type[SubmissionError
     ),
     "method crashes": (
         {"entry_point": "lb_fake_runner:crash"}, {}, VerificationFailed,
-        r"method 'lb_fake_runner:crash' crashed during verification: "
-        r"RuntimeError: simulated crash inside the method",
+        r"method 'lb_fake_runner:crash' crashed during verification: MethodFailed: the method "
+        r"raised RuntimeError in load\(\): simulated crash inside the method",
     ),
     "method exceeds time limit": (
         {"entry_point": "lb_fake_runner:sleep"},
         {"limits": VerifyLimits(wall_time_s=1.5, memory_bytes=512 * 1024**2)},
         VerificationFailed,
         r"method 'lb_fake_runner:sleep' exceeded the wall-time limit of 1.5 s while re-running "
-        r"3 episode\(s\); the worker was killed",
+        r"3 episode\(s\); it was killed",
     ),
     "method exceeds memory limit": (
         {"entry_point": "lb_fake_runner:oom"}, {}, VerificationFailed,
@@ -364,13 +364,13 @@ def test_worker_gets_a_clean_environment(
 def test_file_entry_points_run_from_their_directory(db_url: str, tmp_path: Path) -> None:
     method_file = tmp_path / "methods" / "my_method.py"
     method_file.parent.mkdir()
-    method_file.write_text("def good_file():\n    return None\n")
+    method_file.write_text("from lb_fake_runner import Idle\n\ndef good_file():\n    return Idle()\n")
     entry_point = f"{method_file}:good_file"
     path = H.make_results_file(tmp_path / "f.json", entry_point)
     receipt = _submit(path, entry_point, db_url, {"name": "file", "track": "A"})
     assert receipt.entry.entry_point == entry_point
     # The method hash covers the source: editing the file makes a new method.
-    method_file.write_text("def good_file():\n    return 1\n")
+    method_file.write_text("from lb_fake_runner import Idle\n\ndef good_file():\n    return Idle()  # v2\n")
     receipt2 = _submit(path, entry_point, db_url, {"name": "file v2", "track": "A"})
     assert receipt2.entry.method_hash != receipt.entry.method_hash
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
+
+import tyro
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -12,32 +14,37 @@ if TYPE_CHECKING:
 
 @dataclass
 class Options:
-    """Validate a results file, re-run a sample of its episodes, and store it."""
+    """Validate a results file, re-run a sample of its episodes in a sandbox, and store it."""
 
-    results: Path
-    """Results file written by `swarmloc evaluate`."""
-    entry_point: str
-    """The method: `package.module:factory`, `path/to/file.py:factory` or a registered name."""
-    name: str
-    """Name shown on the leaderboard (at most 64 characters)."""
-    track: Literal["A", "B"]
-    """A: link trust inside the env's CEKF; B: full estimator."""
+    results: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RESULTS")]
+    """Results file written by `swarmloc evaluate` (it names the method, its track and privileged flag)."""
+    entry_point: str | None = None
+    """The method, if not the one the results file names: `package.module:factory`, `path/to/file.py:factory`
+    or a registered name."""
+    name: str | None = None
+    """Name shown on the leaderboard, at most 64 characters (default: the results file's method name)."""
+    track: Literal["A", "B"] | None = None
+    """A: link trust inside the env's CEKF; B: full estimator (default: the results file's)."""
     authors: str = ""
     """Authors (at most 256 characters)."""
     url: str | None = None
     """Paper or code link (http:// or https://)."""
     description: str = ""
     """Short description (at most 2000 characters)."""
-    privileged: bool = False
-    """The method reads ground truth or fault labels (listed apart, not ranked)."""
+    privileged: bool | None = None
+    """The method reads ground truth or fault labels, listed apart and not ranked (default: the results file's)."""
     weights: Path | None = None
-    """Weights file the method loads; its SHA-256 must match the results file."""
+    """Weights file given to `swarmloc evaluate --weights`; its SHA-256 must match the results file."""
     search_path: tuple[Path, ...] = ()
-    """Directories the method's modules are imported from."""
+    """Directories the method's modules are imported from (the sandbox shows them to the method, read-only)."""
     db_url: str | None = None
-    """Store URL (default: $SWARMLOC_DB, else a SQLite file in the user data directory)."""
+    """Store URL, e.g. `sqlite:///lb.db` or `postgresql+psycopg://user@host/db` (default: $SWARMLOC_DB, else a
+    SQLite file in the user data directory)."""
     trust: bool = False
     """Skip verification; allowed only for the shipped reference methods."""
+    sandbox: bool = True
+    """Re-run inside bubblewrap (`bwrap`). `--no-sandbox` is for your own method on your own store where bwrap is
+    unavailable: it keeps only the time, memory, process and file-size limits."""
     sample_frac: float = 0.1
     """Fraction of episodes re-run for verification (at least `min_episodes`)."""
     min_episodes: int = 3
@@ -47,7 +54,11 @@ class Options:
     time_limit_s: float = 900.0
     """Wall-time limit of the verification re-run, in seconds."""
     memory_limit_mb: int = 8192
-    """Address-space limit of the verification worker, in MiB."""
+    """Address-space limit of the verification worker and of the method's process, each, in MiB."""
+    max_processes: int = 1024
+    """Processes and threads each verification sandbox may hold."""
+    max_file_mb: int = 64
+    """Largest file (captured output included) a verification process may write, in MiB."""
 
 
 def run(opts: Options, console: Console | None = None) -> int:
@@ -78,8 +89,10 @@ def run(opts: Options, console: Console | None = None) -> int:
             sample_frac=opts.sample_frac,
             min_episodes=opts.min_episodes,
             sample_seed=opts.seed,
-            limits=VerifyLimits(wall_time_s=opts.time_limit_s, memory_bytes=opts.memory_limit_mb * 1024**2),
+            limits=VerifyLimits(wall_time_s=opts.time_limit_s, memory_bytes=opts.memory_limit_mb * 1024**2,
+                                max_processes=opts.max_processes, max_file_bytes=opts.max_file_mb * 1024**2),
             search_path=opts.search_path,
+            sandbox=opts.sandbox,
         )
     except (SubmissionError, StoreError, ValueError) as err:
         out.print(Text(f"submission refused: {err}", style="bold red"))
