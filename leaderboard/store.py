@@ -3,7 +3,8 @@
 Where: the ``db_url`` argument, else the ``SWARMLOC_DB`` environment variable, else a
 SQLite file ``leaderboard.db`` in ``platformdirs.user_data_dir("swarmloc")``. Only
 portable SQL is used (ORM queries, generic column types), so a PostgreSQL URL such as
-``postgresql+psycopg://user@host/db`` works unchanged once its driver is installed.
+``postgresql+psycopg://user@host/db`` works unchanged (driver: ``pip install
+'swarmloc[postgresql]'``).
 
 Guarantees:
 
@@ -16,7 +17,12 @@ Guarantees:
   raises :class:`~swarmloc.leaderboard.errors.DuplicateSubmission`.
 * **Concurrency.** On SQLite, write transactions start with ``BEGIN IMMEDIATE`` (so two
   writers queue instead of dead-locking on a lock upgrade), wait on a busy timeout, and
-  are retried with back-off if the database stays locked.
+  are retried with back-off if the database stays locked. On PostgreSQL, concurrent
+  submissions of one method meet the unique constraint (one lands, the other is a
+  duplicate), and schema creation or upgrade holds an advisory lock.
+
+The test suite runs the same store tests on SQLite and on a throwaway PostgreSQL server
+(``tests/test_leaderboard_store.py``).
 """
 
 from __future__ import annotations
@@ -80,6 +86,7 @@ test keeps the two in sync.
 """
 
 _RETRIES = 8
+_SCHEMA_LOCK_KEY = 0x5357_4C4F  # "SWLO": PostgreSQL advisory lock held while creating or upgrading the schema
 
 
 def duplicate_error(entry_point: str, method_hash: str, suite_name: str, suite_version: str,
@@ -186,6 +193,10 @@ class LeaderboardStore:
     def _ensure_schema(self) -> None:
         def work() -> None:
             with self._write_engine.begin() as conn:
+                if conn.dialect.name == "postgresql":
+                    # Two processes opening a fresh store would both create the tables; this
+                    # lock (released at commit) makes the second wait, then see them.
+                    conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_SCHEMA_LOCK_KEY})")
                 tables = set(inspect(conn).get_table_names())
                 if SchemaVersionRow.__tablename__ not in tables:
                     if tables & {SubmissionRow.__tablename__, TaskAggregateRow.__tablename__}:

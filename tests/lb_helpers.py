@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,8 @@ from swarmloc.bench.evaluation.results import (
     suite_sha256,
     write_results,
 )
+from swarmloc.leaderboard.errors import SandboxUnavailable
+from swarmloc.leaderboard.sandbox import require_sandbox
 from swarmloc.leaderboard.verify import VerifyLimits
 
 TESTS_DIR = Path(__file__).resolve().parent
@@ -26,6 +29,22 @@ TASKS = ("swarmloc/Ideal-v0", "swarmloc/NLOS-v0")
 SEEDS = (1000, 1001, 1002)
 FAKE_RUNNER = "lb_fake_runner:run_episodes"
 TEST_LIMITS = VerifyLimits(wall_time_s=20.0, memory_bytes=512 * 1024**2)
+REQUIRE_SANDBOX_ENV = "SWARMLOC_REQUIRE_SANDBOX"
+
+
+def sandbox_unavailable() -> str | None:
+    """Why verification cannot be sandboxed here (None when bubblewrap works).
+
+    With ``SWARMLOC_REQUIRE_SANDBOX=1`` (set by ``.ci/run``) a missing sandbox raises instead,
+    so that CI never passes without testing it.
+    """
+    try:
+        require_sandbox()
+    except SandboxUnavailable as err:
+        if os.environ.get(REQUIRE_SANDBOX_ENV) == "1":
+            raise RuntimeError(f"{REQUIRE_SANDBOX_ENV}=1 but {err}") from None
+        return str(err)
+    return None
 
 
 @dataclass(frozen=True)
@@ -102,4 +121,6 @@ def submit_options(db_url: str) -> dict[str, Any]:
         "search_path": [TESTS_DIR],
         "limits": TEST_LIMITS,
         "sample_seed": 7,
+        # The sandbox's own tests (test_lb_hostile_*) require it; these run either way.
+        "sandbox": sandbox_unavailable() is None,
     }

@@ -9,9 +9,7 @@ from __future__ import annotations
 import io
 import json
 import math
-import subprocess
 import sys
-import textwrap
 import types
 from pathlib import Path
 from typing import Any
@@ -19,12 +17,11 @@ from typing import Any
 import lb_helpers as H
 import pytest
 from rich.console import Console
-from sqlalchemy import event
-from sqlalchemy.orm import Session
 
+from swarmloc.bench.cli import leaderboard_export, leaderboard_html, leaderboard_show
+from swarmloc.bench.cli import submit as submit_command
 from swarmloc.leaderboard import store as store_module
 from swarmloc.leaderboard import views
-from swarmloc.bench.cli import leaderboard_export, leaderboard_html, leaderboard_show, submit as submit_command
 from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import (
     DuplicateSubmission,
@@ -375,77 +372,7 @@ def test_file_entry_points_run_from_their_directory(db_url: str, tmp_path: Path)
     assert receipt2.entry.method_hash != receipt.entry.method_hash
 
 
-# -- the store -----------------------------------------------------------------------
-
-
-def test_sql_metacharacters_are_stored_verbatim(db_url: str, tmp_path: Path) -> None:
-    name = "Robert'); DROP TABLE submissions;-- \" % _ \\"
-    path = H.make_results_file(tmp_path / "sql.json", "lb_fake_runner:good_sql")
-    receipt = _submit(path, "lb_fake_runner:good_sql", db_url,
-                      {"name": name, "track": "A", "authors": "O'Brien; --"})
-    with LeaderboardStore(db_url) as store:
-        assert store.get(receipt.id).name == name
-        assert store.get(receipt.id).authors == "O'Brien; --"
-        assert store.count() == 2
-
-
-def test_a_write_that_fails_midway_leaves_the_store_unchanged(db_url: str, tmp_path: Path) -> None:
-    path = H.make_results_file(tmp_path / "mid.json", "lb_fake_runner:good_mid")
-    before = _snapshot(db_url)
-
-    def fail_after_flush(session: Session, _context: Any) -> None:
-        raise RuntimeError("disk unplugged after the rows were written")
-
-    event.listen(Session, "after_flush", fail_after_flush)
-    try:
-        with pytest.raises(RuntimeError, match="disk unplugged"):
-            _submit(path, "lb_fake_runner:good_mid", db_url)
-    finally:
-        event.remove(Session, "after_flush", fail_after_flush)
-    assert _snapshot(db_url) == before
-
-
-CONCURRENT_SUBMIT = textwrap.dedent(
-    """
-    import sys, time
-    sys.path.insert(0, {tests!r})
-    import lb_helpers as H
-    from swarmloc.leaderboard.store import LeaderboardStore
-    from swarmloc.leaderboard.submit import submit
-    url, path, entry, name, start = sys.argv[1:6]
-    time.sleep(max(0.0, float(start) - time.time()))
-    submit(path, entry, {{"name": name, "track": "A"}}, **H.submit_options(url))
-    # Then hammer the store layer directly so the two writers really overlap.
-    with LeaderboardStore(url) as store:
-        base = next(e for e in store.entries() if e.name == name)
-        for i in range(15):
-            store.add(base.__class__(**{{**base.__dict__, "method_hash": f"{{name}}-{{i:03d}}".ljust(64, "0"),
-                                         "id": None}}))
-    print("ok", name)
-    """
-)
-
-
-def test_concurrent_submits_from_two_processes_both_land(db_url: str, tmp_path: Path) -> None:
-    import time
-
-    start = time.time() + 2.0
-    procs = []
-    for name in ("alpha", "beta"):
-        entry = f"lb_fake_runner:good_{name}"
-        path = H.make_results_file(tmp_path / f"{name}.json", entry)
-        procs.append(subprocess.Popen(
-            [sys.executable, "-c", CONCURRENT_SUBMIT.format(tests=str(H.TESTS_DIR)),
-             db_url, str(path), entry, name, str(start)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        ))
-    outputs = [p.communicate(timeout=60) for p in procs]
-    for proc, (_out, err) in zip(procs, outputs, strict=True):
-        assert proc.returncode == 0, err
-    with LeaderboardStore(db_url) as store:
-        names = [e.name for e in store.entries()]
-    assert names.count("alpha") == 16 and names.count("beta") == 16
-    assert len(names) == 33
+# -- the store (the rest runs on SQLite and PostgreSQL in test_leaderboard_store.py) ----
 
 
 def test_store_location_env_var_and_default(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -458,38 +385,6 @@ def test_store_location_env_var_and_default(tmp_path: Path, monkeypatch: pytest.
     assert store_module.default_db_url() == f"sqlite:///{tmp_path / 'xdg' / 'swarmloc' / 'leaderboard.db'}"
     with pytest.raises(StoreError, match=r"invalid database URL 'not a url'"):
         LeaderboardStore("not a url")
-
-
-def test_schema_version_and_migration_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    url = f"sqlite:///{tmp_path / 'm.db'}"
-    with LeaderboardStore(url) as store:
-        assert store.schema_version() == store_module.SCHEMA_VERSION == 1
-    applied = []
-
-    def to_v2(conn: Any) -> None:
-        conn.exec_driver_sql("CREATE TABLE probe_v2 (id INTEGER PRIMARY KEY)")
-        applied.append(2)
-
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(store_module.MIGRATIONS, 1, to_v2)
-    with LeaderboardStore(url) as store:
-        assert store.schema_version() == 2 and applied == [2]
-    with LeaderboardStore(url) as store:  # already upgraded: nothing re-applied
-        assert applied == [2]
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 1)
-    with pytest.raises(StoreError, match=r"schema version 2; this swarmloc supports up to 1"):
-        LeaderboardStore(url)
-
-
-def test_schema_is_portable_to_postgresql() -> None:
-    from sqlalchemy.dialects import postgresql
-    from sqlalchemy.schema import CreateTable
-
-    for table in store_module.Base.metadata.sorted_tables:
-        ddl = str(CreateTable(table).compile(dialect=postgresql.dialect()))
-        assert "CREATE TABLE" in ddl
-    ddl = str(CreateTable(store_module.SubmissionRow.__table__).compile(dialect=postgresql.dialect()))
-    assert "verification_seed BIGINT" in ddl and "created_utc TIMESTAMP WITH TIME ZONE" in ddl
 
 
 # -- views ---------------------------------------------------------------------------
