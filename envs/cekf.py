@@ -204,6 +204,60 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
                     est[t, b, i, d] = x[b, i, d]
 
 
+@njit(cache=True, inline="always")
+def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, resid, pred, nis, yv, S):
+    """Innovation features of one UAV's L channels at its prior (see ``channel_features``).
+
+    Args:
+        x, P: the UAV's prior mean ``(6,)`` and covariance ``(6, 6)``.
+        z: ``(L, 3)`` measurements; valid ``(L,)``; kind, target, r0 ``(L,)``.
+        anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        resid, pred, nis: ``(L,)`` outputs.
+        yv, S: scratch 3-vector and 3×3 matrix.
+    """
+    for l in range(kind.shape[0]):
+        if not valid[l]:
+            resid[l] = 0.0
+            pred[l] = 0.0
+            nis[l] = 0.0
+            continue
+        ch = kind[l]
+        j = target[l]
+        if ch == ANCHOR or ch == PEER:
+            if ch == ANCHOR:
+                q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
+            else:
+                q0, q1, q2 = prior_pos[j, 0], prior_pos[j, 1], prior_pos[j, 2]
+            d0, d1, d2 = x[0] - q0, x[1] - q1, x[2] - q2
+            rng = max(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), _MIN_RANGE)
+            h0, h1, h2 = d0 / rng, d1 / rng, d2 / rng
+            y = z[l, 0] - rng
+            # S = h P_pp hᵀ + R0
+            s = (h0 * (P[0, 0] * h0 + P[0, 1] * h1 + P[0, 2] * h2)
+                 + h1 * (P[1, 0] * h0 + P[1, 1] * h1 + P[1, 2] * h2)
+                 + h2 * (P[2, 0] * h0 + P[2, 1] * h1 + P[2, 2] * h2) + r0[l])
+            resid[l] = abs(y)
+            pred[l] = rng
+            nis[l] = y * y / s
+        else:
+            # 3-vector channel: S = P_pp + R0·I (H = ±I on position)
+            dist2 = 0.0
+            for d in range(3):
+                if ch == GPS:
+                    yv[d] = z[l, d] - x[d]
+                else:
+                    qd = landmarks[j, d] if ch == LANDMARK else prior_pos[j, d]
+                    hd = qd - x[d]
+                    dist2 += hd * hd
+                    yv[d] = z[l, d] - hd
+            for r_ in range(3):
+                for c_ in range(3):
+                    S[r_, c_] = P[r_, c_] + (r0[l] if r_ == c_ else 0.0)
+            nis[l] = _quad_inv3(S, yv)
+            resid[l] = math.sqrt(yv[0] * yv[0] + yv[1] * yv[1] + yv[2] * yv[2])
+            pred[l] = math.sqrt(dist2) if ch != GPS else 0.0
+
+
 @njit(cache=True, parallel=True)
 def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos,
                      resid, pred, nis):
@@ -213,53 +267,13 @@ def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior
     ‖h(x⁻)‖ to the channel's target (0 for GPS), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0.
     Invalid channels get zeros.
     """
-    n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2]
+    n_b, n = z.shape[0], z.shape[1]
     for b in prange(n_b):
+        yv = np.empty(3)
+        S = np.empty((3, 3))
         for i in range(n):
-            Pi = P[b, i]
-            for l in range(n_l):
-                if not valid[b, i, l]:
-                    resid[b, i, l] = 0.0
-                    pred[b, i, l] = 0.0
-                    nis[b, i, l] = 0.0
-                    continue
-                ch = kind[i, l]
-                j = target[i, l]
-                if ch == ANCHOR or ch == PEER:
-                    if ch == ANCHOR:
-                        q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
-                    else:
-                        q0, q1, q2 = prior_pos[b, j, 0], prior_pos[b, j, 1], prior_pos[b, j, 2]
-                    d0, d1, d2 = x[b, i, 0] - q0, x[b, i, 1] - q1, x[b, i, 2] - q2
-                    rng = max(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), _MIN_RANGE)
-                    h0, h1, h2 = d0 / rng, d1 / rng, d2 / rng
-                    y = z[b, i, l, 0] - rng
-                    # S = h P_pp hᵀ + R0
-                    s = (h0 * (Pi[0, 0] * h0 + Pi[0, 1] * h1 + Pi[0, 2] * h2)
-                         + h1 * (Pi[1, 0] * h0 + Pi[1, 1] * h1 + Pi[1, 2] * h2)
-                         + h2 * (Pi[2, 0] * h0 + Pi[2, 1] * h1 + Pi[2, 2] * h2) + r0[i, l])
-                    resid[b, i, l] = abs(y)
-                    pred[b, i, l] = rng
-                    nis[b, i, l] = y * y / s
-                else:
-                    # 3-vector channel: S = P_pp + R0·I (H = ±I on position)
-                    yv = np.empty(3)
-                    dist2 = 0.0
-                    for d in range(3):
-                        if ch == GPS:
-                            yv[d] = z[b, i, l, d] - x[b, i, d]
-                        else:
-                            qd = landmarks[j, d] if ch == LANDMARK else prior_pos[b, j, d]
-                            hd = qd - x[b, i, d]
-                            dist2 += hd * hd
-                            yv[d] = z[b, i, l, d] - hd
-                    S = np.empty((3, 3))
-                    for r_ in range(3):
-                        for c_ in range(3):
-                            S[r_, c_] = Pi[r_, c_] + (r0[i, l] if r_ == c_ else 0.0)
-                    nis[b, i, l] = _quad_inv3(S, yv)
-                    resid[b, i, l] = math.sqrt(yv[0] * yv[0] + yv[1] * yv[1] + yv[2] * yv[2])
-                    pred[b, i, l] = math.sqrt(dist2) if ch != GPS else 0.0
+            features_uav(x[b, i], P[b, i], z[b, i], valid[b, i], kind[i], target[i], r0[i], anchors, landmarks,
+                         prior_pos[b], resid[b, i], pred[b, i], nis[b, i], yv, S)
 
 
 @njit(cache=True, inline="always")

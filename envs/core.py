@@ -18,13 +18,10 @@ import numba
 import numpy as np
 
 from . import cekf
+from .core_kernel import FilterArrays, core_step, step_episodes
 from .specs import TaskSpec
 from .world import World
 from .worlds import AnyWorld, make_world
-
-#: private per-episode state of the simulated world that one ``sense`` changes (Gauss–Markov NLOS)
-_WORLD_PRIVATE_STATE = ("_gm_bias", "_gm_left")
-
 
 #: below this batch size the kernels run on the calling thread: a parallel region over a
 #: handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
@@ -60,6 +57,7 @@ class CoreStep:
         prev_trust: ``(B, N, L)`` trust applied at the previous update.
         jerk: ``(B, N)`` IMU jerk ‖u(k) − u(k−1)‖ [m/s²].
         valid: ``(B, N, L)`` pending measurement present.
+        update_valid: ``(B, N, L)`` measurement present in the last update (what its reward scores).
         estimate: ``(B, N, 3)`` posterior position of the last update (prior mean after reset).
         truth: ``(B, N, 3)`` true position at the last update.
         label: ``(B, N, L)`` fault labels of the measurements of the last update.
@@ -76,6 +74,7 @@ class CoreStep:
     prev_trust: np.ndarray
     jerk: np.ndarray
     valid: np.ndarray
+    update_valid: np.ndarray
     estimate: np.ndarray
     truth: np.ndarray
     label: np.ndarray
@@ -116,29 +115,62 @@ class LinkTrustCore:
         z = lambda *shape, dt=np.float64: np.zeros(shape, dtype=dt)  # noqa: E731
         self._out = CoreStep(
             resid=z(n_b, n, n_l), pred=z(n_b, n, n_l), nis=z(n_b, n, n_l), prev_trust=np.ones((n_b, n, n_l)),
-            jerk=z(n_b, n), valid=z(n_b, n, n_l, dt=np.bool_), estimate=z(n_b, n, 3), truth=z(n_b, n, 3),
+            jerk=z(n_b, n), valid=z(n_b, n, n_l, dt=np.bool_), update_valid=z(n_b, n, n_l, dt=np.bool_),
+            estimate=z(n_b, n, 3), truth=z(n_b, n, 3),
             label=z(n_b, n, n_l, dt=np.bool_), applied=np.ones((n_b, n, n_l)),
             active=z(n_b, n, n_l, dt=np.bool_), flops=z(n_b, n), steps=z(n_b, dt=np.int64),
             done=z(n_b, dt=np.bool_),
         )
-        self._flops = z(n_b, n)
-        self._z = z(n_b, n, n_l, 3)
-        self._valid = z(n_b, n, n_l, dt=np.bool_)
+        self._init_kernel()
 
     # ------------------------------------------------------------------ internals
-    def _advance(self, idx: np.ndarray | None = None) -> None:
-        """Sense the next step and predict to it (pending update), for all episodes."""
-        w, s = self.world, self.spec
-        prev_imu = w.buffers.imu.copy()
-        buf = w.sense()
-        cekf.cekf_predict(self.x, self.P, buf.imu, s.dt, s.sensors.imu_sigma, self._prior_pos)
-        self._z[:] = buf.z
-        self._valid[:] = buf.valid
-        o = self._out
-        cekf.channel_features(self.x, self.P, self._z, self._valid, self.layout.kind, self.layout.target,
-                              self._r0, w.anchors, w.landmarks, self._prior_pos, o.resid, o.pred, o.nis)
-        o.jerk[:] = np.linalg.norm(buf.imu - prev_imu, axis=-1)
-        o.valid[:] = self._valid
+    def _init_kernel(self) -> None:
+        """Bind the step kernel to the core's and the world's arrays (``core_kernel.core_step``)."""
+        w, s, o, buf = self.world, self.spec, self._out, self.world.buffers
+        self._filter = FilterArrays(
+            dt=float(s.dt), imu_sigma=float(s.sensors.imu_sigma), alpha_th=float(s.filter.alpha_th),
+            alpha_min=float(s.filter.alpha_min), n_steps=int(s.n_steps), kind=self.layout.kind,
+            target=self.layout.target, r0=self._r0, anchors=w.anchors, landmarks=w.landmarks, world_pos=buf.pos,
+            world_imu=buf.imu, world_z=buf.z, world_valid=buf.valid, world_label=buf.label, x=self.x, P=self.P,
+            prior_pos=self._prior_pos, imu_prev=np.zeros_like(buf.imu), resid=o.resid, pred=o.pred, nis=o.nis,
+            valid=o.valid, jerk=o.jerk, estimate=o.estimate, truth=o.truth, label=o.label,
+            update_valid=o.update_valid, applied=o.applied, prev_trust=o.prev_trust, active=o.active, flops=o.flops,
+            steps=o.steps, done=o.done,
+        )
+        # a simulated world senses inside the kernel; any other world senses in Python first
+        self._world_inputs = (w.inputs, w.schedule) if isinstance(w, World) else (None, None)
+        self._everyone = np.ones(self.batch_size, dtype=bool)
+
+    def _kernel(self, trust: np.ndarray, score: bool, advance: np.ndarray, sense: bool) -> None:
+        """Run ``core_kernel.core_step`` (on the calling thread for a small batch)."""
+        w, fs = self._world_inputs if sense else (None, None)
+        if self.batch_size < SERIAL_BELOW:
+            step_episodes(w, fs, self._filter, trust, score, advance, 0, self.batch_size)
+        else:
+            core_step(w, fs, self._filter, trust, score, advance)
+
+    def _advance(self, mask: np.ndarray | None = None, trust: np.ndarray | None = None) -> None:
+        """Score the pending update with ``trust`` (if given), then sense and predict the next step.
+
+        The episodes that go on are those not done, within ``mask`` when given (a partial
+        reset); the others do not move. A simulated world does it all in one kernel call.
+        """
+        go = self._everyone if mask is None else mask
+        score = trust is not None
+        if self._world_inputs[0] is not None:
+            self._kernel(trust if score else self._out.applied, score, go, sense=True)
+            return
+        w, f = self.world, self._filter
+        if score:
+            self._kernel(trust, True, ~self._everyone, sense=False)
+            go = go & ~f.done
+        keep = ~go
+        saved = [a[keep].copy() for a in self._world_state()] if keep.any() else []
+        f.imu_prev[:] = w.buffers.imu
+        w.sense()
+        for array, value in zip(self._world_state(), saved):
+            array[keep] = value
+        self._kernel(self._out.applied, False, go, sense=False)
 
     # ------------------------------------------------------------------ API
     @small_batch_serial
@@ -160,6 +192,7 @@ class LinkTrustCore:
         o.prev_trust[idx] = 1.0
         o.applied[idx] = 1.0
         o.label[idx] = False
+        o.update_valid[idx] = False
         o.active[idx] = False
         o.flops[idx] = 0.0
         o.steps[idx] = 0
@@ -171,71 +204,37 @@ class LinkTrustCore:
         return o
 
     def _advance_subset(self, idx: np.ndarray) -> None:
-        # Only the reset episodes may move: run the step on a sub-batch and scatter back.
-        keep = np.ones(self.batch_size, dtype=bool)
-        keep[idx] = False
-        saved = {name: getattr(self, name)[keep].copy() for name in ("x", "P", "_prior_pos", "_z", "_valid")}
-        world_state = self._world_state()
-        saved_world = [a[keep].copy() for a in world_state]
-        o = self._out
-        saved_out = {name: getattr(o, name)[keep].copy() for name in ("resid", "pred", "nis", "jerk", "valid")}
-        self._advance()
-        for name, value in saved.items():
-            getattr(self, name)[keep] = value
-        for array, value in zip(world_state, saved_world):
-            array[keep] = value
-        for name, value in saved_out.items():
-            getattr(o, name)[keep] = value
+        """Sense and predict the next step of episodes ``idx`` only (a partial reset)."""
+        mask = np.zeros(self.batch_size, dtype=bool)
+        mask[idx] = True
+        self._advance(mask)
 
     def _world_state(self) -> list[np.ndarray]:
-        """The world's ``(B, ...)`` arrays that one ``sense`` changes (restored for episodes not advanced)."""
+        """The ``(B, ...)`` arrays that one ``sense`` of a world sensing in Python changes (restored
+        for the episodes that do not move): its step counter and every step buffer it fills."""
         w = self.world
-        # every step buffer the world fills (optional ones such as VO velocity are None when absent)
-        arrays = [w.steps] + [a for a in vars(w.buffers).values() if isinstance(a, np.ndarray)]
-        return arrays + [getattr(w, name) for name in _WORLD_PRIVATE_STATE if hasattr(w, name)]
-
-    def check_trust(self, trust: np.ndarray) -> np.ndarray:
-        """Validate a trust array: shape ``(B, N, L)``, finite; returns it as float64."""
-        trust = np.asarray(trust, dtype=np.float64)
-        expected = (self.batch_size, self.n_uav, self.n_channels)
-        if trust.shape != expected:
-            raise ValueError(f"trust must have shape (B, N, L) = {expected}, got {trust.shape}")
-        if not np.isfinite(trust).all():
-            bad = np.argwhere(~np.isfinite(trust))[0]
-            raise ValueError(f"trust must be finite; got {trust[tuple(bad)]} at index {tuple(bad.tolist())}")
-        return trust
+        # optional buffers such as VO velocity are None when absent
+        return [w.steps] + [a for a in vars(w.buffers).values() if isinstance(a, np.ndarray)]
 
     @small_batch_serial
     def step(self, trust: np.ndarray) -> CoreStep:
-        """Apply ``trust`` (in [0, 1]; clipped) to the pending update and advance.
+        """Apply ``trust`` to the pending update and advance.
+
+        The trust is used as given: callers validate it once (``TrustEnvBatch.check`` or an
+        adapter's ``ActionChecker``: shape, finite, clipped to [0, 1]).
 
         Args:
-            trust: ``(B, N, L)`` trust α per channel.
+            trust: ``(B, N, L)`` float64 trust α per channel, in [0, 1].
 
         Returns:
             The ``CoreStep`` (estimates and truth of the update just done; features of the
             next pending update). Episodes already done are not advanced.
         """
-        trust = np.clip(self.check_trust(trust), 0.0, 1.0)
-        o, w, s, lay = self._out, self.world, self.spec, self.layout
+        o = self._out
         if o.done.all():
             raise RuntimeError("every episode is done; call reset() first")
-        cekf.cekf_update(self.x, self.P, self._z, self._valid, trust, lay.kind, lay.target, self._r0,
-                         w.anchors, w.landmarks, self._prior_pos, s.filter.alpha_th, s.filter.alpha_min,
-                         o.active, self._flops)
-        live = slice(None) if not o.done.any() else ~o.done
-        o.estimate[live] = self.x[live, :, :3]
-        o.truth[live] = w.buffers.pos[live]
-        o.label[live] = w.buffers.label[live]
-        o.prev_trust[live] = o.applied[live]
-        o.applied[live] = trust[live]
-        o.flops[live] = self._flops[live]
-        o.steps[live] += 1
-        o.done[:] = o.steps >= s.n_steps
-        if o.done.all():
-            return o
-        if o.done.any():
-            self._advance_subset(np.nonzero(~o.done)[0])
-        else:
-            self._advance()
+        # one kernel call: the update and its outputs (estimate, truth, labels, validity,
+        # trust, FLOPs, step count) for the live episodes, then the next pending step of
+        # those that are not done (core_kernel.core_step)
+        self._advance(trust=trust)
         return o

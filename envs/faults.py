@@ -9,7 +9,7 @@ and evolve inside the kernel.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,9 +20,14 @@ from .specs import TaskSpec
 BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
 
 
-@dataclass
-class FaultSchedule:
-    """Fault windows of B episodes (all arrays have a leading batch axis B).
+#: schedule fields that describe the task, not an episode (no leading batch axis)
+PER_TASK_FIELDS = ("gm_mask", "gm_param", "hybrid_nodes", "hybrid_param", "packet_loss")
+
+
+class FaultSchedule(NamedTuple):
+    """Fault windows of B episodes (arrays have a leading batch axis B unless stated).
+
+    A named tuple of arrays so the world kernel can take it as one argument.
 
     Attributes:
         bias_time: ``(B, W, 2)`` range-bias windows [start, end).
@@ -33,6 +38,8 @@ class FaultSchedule:
         imu_nodes: ``(B, Wi, N)`` faulty UAVs per window.
         imu_drop: ``(B, Wi)`` whether the faulty UAVs go blind (no measurement at all).
         outage_time: ``(B, Wo, 2)`` camera outage windows; ``outage_nodes`` ``(B, Wo, N)``.
+        uwb_time: ``(B, Wu, 2)`` UWB outage windows; ``uwb_mask`` ``(B, Wu, N, L)`` the
+            range / peer channels each window silences.
         drift_time: ``(B, Wg, 2)`` GPS drift windows; ``drift_rate`` ``(B, Wg, 3)`` [m/s];
             ``drift_nodes`` ``(B, Wg, N)``.
         gm_mask: ``(N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(6,)``
@@ -51,6 +58,8 @@ class FaultSchedule:
     imu_drop: np.ndarray
     outage_time: np.ndarray
     outage_nodes: np.ndarray
+    uwb_time: np.ndarray
+    uwb_mask: np.ndarray
     drift_time: np.ndarray
     drift_rate: np.ndarray
     drift_nodes: np.ndarray
@@ -71,6 +80,12 @@ class FaultSchedule:
         if self.imu_time.shape[1] == 0:
             return np.full((b, 2), np.nan)
         return np.stack([self.imu_time[:, :, 0].min(axis=1), self.imu_time[:, :, 1].max(axis=1)], axis=1)
+
+    def assign(self, idx: np.ndarray, other: FaultSchedule) -> None:
+        """Overwrite, in place, the windows of episodes ``idx`` with those of ``other`` (``len(idx)`` episodes)."""
+        for name in self._fields:
+            if name not in PER_TASK_FIELDS:
+                getattr(self, name)[idx] = getattr(other, name)
 
 
 def _node_mask(nodes: tuple[int, ...], n: int) -> np.ndarray:
@@ -165,6 +180,14 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
             outage_rows.append((np.tile([t0, t1], (n_b, 1)),
                                 np.broadcast_to(_node_mask(f.vision_outage.nodes, n), (n_b, n)).copy()))
 
+    uwb_rows = []
+    if f.uwb_outage is not None:
+        out = f.uwb_outage
+        kinds = [ANCHOR] * ("anchor" in out.targets) + [PEER, PEER_REL] * ("peer" in out.targets)
+        mask = np.isin(layout.kind, kinds) & _node_mask(out.nodes, n)[:, None]
+        for t0, t1 in out.windows:
+            uwb_rows.append((np.tile([t0, t1], (n_b, 1)), np.broadcast_to(mask, (n_b, n, n_l)).copy()))
+
     drift_rows = []
     for d in f.gps_drifts:
         direction = np.asarray(d.direction, dtype=float)
@@ -202,6 +225,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         imu_drop=stack(imu_rows, 3, (), np.bool_),
         outage_time=stack(outage_rows, 0, (2,)),
         outage_nodes=stack(outage_rows, 1, (n,), np.bool_),
+        uwb_time=stack(uwb_rows, 0, (2,)),
+        uwb_mask=stack(uwb_rows, 1, (n, n_l), np.bool_),
         drift_time=stack(drift_rows, 0, (2,)),
         drift_rate=stack(drift_rows, 1, (3,)),
         drift_nodes=stack(drift_rows, 2, (n,), np.bool_),

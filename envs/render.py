@@ -142,7 +142,7 @@ class FirstEpisodeView:
             w = self._batch.core.world
             self._renderer = TopDownRenderer(self._batch.layout, w.anchors, w.landmarks, self._task_id,
                                              human=self._human)
-        o = self._batch.core._out
+        o = self._batch.last
         return self._renderer.draw(o.truth[0], o.estimate[0], o.applied[0], o.valid[0],
                                    float(o.steps[0]) * self._batch.spec.dt)
 

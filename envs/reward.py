@@ -84,3 +84,8 @@ def standard_reward(estimate: np.ndarray, truth: np.ndarray, applied: np.ndarray
                        energy_penalty=energy_penalty, jitter_penalty=jitter_penalty, flops=np.asarray(flops, float)
                        * np.ones_like(accuracy), delay_ms=1e3 * t_calc * np.ones_like(accuracy),
                        energy_j=profile.joules(flops) * np.ones_like(accuracy))
+
+
+def team_reward(terms: RewardTerms) -> np.ndarray:
+    """``(B,)`` team reward: the mean over UAVs of the per-UAV reward."""
+    return terms.reward.sum(axis=1) / terms.reward.shape[1]

@@ -58,38 +58,66 @@ def _mix(z: np.uint64) -> np.uint64:
 
 
 @njit(cache=True, inline="always")
-def hash_key(seed: int, step: int, stream: int, index: int) -> np.uint64:
-    """64-bit hash of a draw's key (seed, step, stream, index)."""
+def stream_key(seed: int, step: int, stream: int) -> np.uint64:
+    """The hash of a draw's key up to its index: three of the four SplitMix64 rounds.
+
+    A kernel that draws many elements of one stream in one step computes this once and
+    finishes each draw with ``uniform_at`` / ``normal_at`` (one round each); the numbers
+    are the same as ``uniform`` / ``normal`` on the full key.
+    """
     h = _mix(np.uint64(seed) + _GOLDEN)
     h = _mix(h ^ (np.uint64(step + 1) * _GOLDEN))
-    h = _mix(h ^ (np.uint64(stream) * _M1))
-    return _mix(h ^ (np.uint64(index) * _M2 + _GOLDEN))
+    return _mix(h ^ (np.uint64(stream) * _M1))
+
+
+@njit(cache=True, inline="always")
+def hash_key(seed: int, step: int, stream: int, index: int) -> np.uint64:
+    """64-bit hash of a draw's key (seed, step, stream, index)."""
+    return _mix(stream_key(seed, step, stream) ^ (np.uint64(index) * _M2 + _GOLDEN))
+
+
+@njit(cache=True, inline="always")
+def uniform_at(key: np.uint64, index: int) -> float:
+    """Uniform draw in (0, 1) of element ``index`` of the stream ``key = stream_key(...)``."""
+    h = _mix(key ^ (np.uint64(index) * _M2 + _GOLDEN))
+    return (float(h >> _S11) + 0.5) * _TWO_M53
+
+
+@njit(cache=True, inline="always")
+def normal_at(key: np.uint64, index: int) -> float:
+    """Standard normal draw (Box–Muller on sub-indices 2·index and 2·index+1) of stream ``key``."""
+    u1 = uniform_at(key, 2 * index)
+    u2 = uniform_at(key, 2 * index + 1)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(cache=True)
+def student_t_at(key: np.uint64, index: int, dof: int) -> float:
+    """Student-t draw with integer ``dof`` of stream ``key``: z / sqrt(χ²_dof / dof), χ² a sum of squares."""
+    z = normal_at(key, index * 64)
+    chi2 = 0.0
+    for k in range(dof):
+        g = normal_at(key, index * 64 + 1 + k)
+        chi2 += g * g
+    return z / math.sqrt(chi2 / dof)
 
 
 @njit(cache=True, inline="always")
 def uniform(seed: int, step: int, stream: int, index: int) -> float:
     """Uniform draw in the open interval (0, 1)."""
-    h = hash_key(seed, step, stream, index)
-    return (float(h >> _S11) + 0.5) * _TWO_M53
+    return uniform_at(stream_key(seed, step, stream), index)
 
 
 @njit(cache=True, inline="always")
 def normal(seed: int, step: int, stream: int, index: int) -> float:
     """Standard normal draw (Box–Muller on sub-indices 2·index and 2·index+1)."""
-    u1 = uniform(seed, step, stream, 2 * index)
-    u2 = uniform(seed, step, stream, 2 * index + 1)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+    return normal_at(stream_key(seed, step, stream), index)
 
 
 @njit(cache=True)
 def student_t(seed: int, step: int, stream: int, index: int, dof: int) -> float:
     """Student-t draw with integer ``dof``: z / sqrt(χ²_dof / dof), χ² as a sum of squares."""
-    z = normal(seed, step, stream, index * 64)
-    chi2 = 0.0
-    for k in range(dof):
-        g = normal(seed, step, stream, index * 64 + 1 + k)
-        chi2 += g * g
-    return z / math.sqrt(chi2 / dof)
+    return student_t_at(stream_key(seed, step, stream), index, dof)
 
 
 def uniform_array(seed: int, step: int, stream: int, indices: np.ndarray) -> np.ndarray:

@@ -139,7 +139,7 @@ class SwarmLocTorchRLEnv(EnvBase):
         if tensordict is not None and "_reset" in tensordict.keys():
             reset = tensordict.get("_reset").reshape(self._batch.batch_size).cpu().numpy()
             if not reset.any():  # nothing to restart
-                return self._output(None, None, self._batch.core._out.done.copy())
+                return self._output(None, None, self._batch.last.done.copy())
             mask = None if reset.all() else reset
         index = None if mask is None else np.nonzero(mask)[0]
         self._batch.reset(self._seeder.draw(index), mask)

@@ -22,7 +22,7 @@ from gymnasium.utils import seeding
 from .core import CoreStep, LinkTrustCore
 from .cost import DEFAULT_PROFILE, ProcessorProfile
 from .observation import N_FEATURES, build_observation, kind_one_hot
-from .reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward
+from .reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward, team_reward
 from .specs import TaskSpec
 from .seeds import SEED_BOUND
 from .tasks import canonical_task_id, get_spec
@@ -189,20 +189,30 @@ class TrustEnvBatch:
         reward_weights: λ and constants of the standard reward (default: standard v0).
         policy_flops: FLOPs the method spends per UAV per step; added to the filter's
             FLOPs in the delay and energy terms (default 0).
+        policy_flops_per_channel: FLOPs the method spends per present channel of the
+            update (a method's declared ``flops_per_channel``; default 0).
         processor: processor profile converting FLOPs to seconds and joules.
+
+    This is the one place where a Track A step is scored: every adapter and the bench's
+    runner call :meth:`step`, so observation, reward, FLOPs and delay cannot drift apart.
     """
 
     def __init__(self, spec: TaskSpec, batch_size: int, *, reward_weights: RewardWeights = STANDARD_WEIGHTS,
-                 policy_flops: float = 0.0, processor: ProcessorProfile = DEFAULT_PROFILE):
+                 policy_flops: float = 0.0, policy_flops_per_channel: float = 0.0,
+                 processor: ProcessorProfile = DEFAULT_PROFILE):
         self.spec = spec
         self.batch_size = batch_size
         self.core = LinkTrustCore(spec, batch_size)
         self.layout = self.core.layout
         self.n_uav, self.n_channels = self.core.n_uav, self.core.n_channels
         self.reward_weights = reward_weights
-        self.policy_flops = policy_flops
+        self.policy_flops = as_policy_flops(policy_flops)
+        self.policy_flops_per_channel = as_policy_flops(policy_flops_per_channel)
         self.processor = processor
         self._one_hot = kind_one_hot(self.layout.kind)
+        #: validates a batch of trust ``(B, N, L)`` (for callers without an adapter of their own)
+        self.check = ActionChecker((batch_size, self.n_uav, self.n_channels), "(B, N, L)")
+        self._last: CoreStep | None = None
 
     # ------------------------------------------------------------------ shapes
     @property
@@ -227,23 +237,46 @@ class TrustEnvBatch:
     # ------------------------------------------------------------------ dynamics
     def reset(self, seeds: np.ndarray, mask: np.ndarray | None = None) -> CoreStep:
         """Start the episodes in ``mask`` (all if None) with integer ``seeds`` ``(B,)``."""
-        return self.core.reset(seeds, mask)
+        self._last = self.core.reset(seeds, mask)
+        return self._last
 
     def step(self, trust: np.ndarray) -> tuple[CoreStep, RewardTerms]:
-        """Apply validated trust ``(B, N, L)`` in [0, 1]; returns the core step and reward terms ``(B, N)``."""
+        """Apply validated trust ``(B, N, L)`` in [0, 1] and score the update it made.
+
+        Args:
+            trust: trust already validated once (by :attr:`check` or an adapter's checker).
+
+        Returns:
+            The core step and the reward terms ``(B, N)`` of the update just done: its
+            channels' validity, its applied and previous trust, its FLOPs (filter +
+            policy, per UAV plus per present channel).
+        """
         o = self.core.step(trust)
-        terms = standard_reward(o.estimate, o.truth, o.applied, o.prev_trust, o.valid, self.spec.filter.alpha_th,
-                                o.flops, self.policy_flops, self.reward_weights, self.processor)
+        policy_flops = self.policy_flops + self.policy_flops_per_channel * o.update_valid.sum(axis=-1)
+        terms = standard_reward(o.estimate, o.truth, o.applied, o.prev_trust, o.update_valid,
+                                self.spec.filter.alpha_th, o.flops, policy_flops, self.reward_weights, self.processor)
+        self._last = o
         return o, terms
 
     # ------------------------------------------------------------------ outputs
+    @property
+    def last(self) -> CoreStep:
+        """The ``CoreStep`` of the last ``reset``/``step`` (pending features, last update's results)."""
+        if self._last is None:
+            raise RuntimeError("call reset() before reading the environments' state")
+        return self._last
+
+    def pending_labels(self) -> np.ndarray:
+        """``(B, N, L)`` fault labels of the pending measurements (privileged: metrics and oracles only)."""
+        return self.core.world.buffers.label
+
     def observation(self, out: np.ndarray | None = None) -> np.ndarray:
         """Observation ``(B, N, L, F)`` float32 in [0, 1] of the pending step (a new array unless ``out``)."""
-        return build_observation(self.core._out, self._one_hot, out)
+        return build_observation(self.last, self._one_hot, out)
 
     def position_error(self) -> np.ndarray:
         """``(B, N)`` ‖p̂ − p‖ of the last update [m] (the prior mean after reset)."""
-        o = self.core._out
+        o = self.last
         d = o.estimate - o.truth
         return np.sqrt((d * d).sum(axis=-1))
 
@@ -267,7 +300,7 @@ class TrustEnvBatch:
 
     def team_reward(self, terms: RewardTerms) -> np.ndarray:
         """``(B,)`` team reward: the mean over UAVs of the standard reward."""
-        return terms.reward.sum(axis=1) / self.n_uav
+        return team_reward(terms)
 
     def info_arrays(self, terms: RewardTerms) -> dict[str, np.ndarray]:
         """Per-UAV info ``(B, N)`` arrays (new arrays): ``INFO_KEYS``."""

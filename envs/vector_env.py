@@ -144,7 +144,7 @@ class SwarmLocVectorEnv(VectorEnv):
                     infos[key][resetting] = 0.0
             for key in INFO_KEYS:
                 infos["_" + key] = has.copy()
-        steps = self._batch.core._out.steps
+        steps = self._batch.last.steps
         truncated = steps >= self.horizon
         self._autoreset = truncated.copy()
         return self._observation(), rewards, np.zeros(n_b, dtype=bool), truncated, infos
@@ -155,7 +155,7 @@ class SwarmLocVectorEnv(VectorEnv):
             return None
         from .render import TopDownRenderer
 
-        w, o, s = self._batch.core.world, self._batch.core._out, self.task_spec
+        w, o, s = self._batch.core.world, self._batch.last, self.task_spec
         if self._renderers is None:
             self._renderers = [TopDownRenderer(self._batch.layout, w.anchors, w.landmarks, s.task_id)
                                for _ in range(self.num_envs)]

@@ -115,7 +115,7 @@ class _WrongTrust:
 
 def test_bad_policy_output_rejected():
     spec = get_spec("swarmloc/Ideal-v0", duration=0.5)
-    with pytest.raises(ValueError, match=r"trust must have shape \(B, N, L\)"):
+    with pytest.raises(ValueError, match=r"must have shape \(B, N, L\)"):
         rollout(_as_loaded(_WrongTrust(), "A"), spec, [1])
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from swarmloc.bench.evaluation import metrics as M
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.bench.evaluation.traces import Trace
-from swarmloc.envs.reward import standard_reward
+from swarmloc.envs.reward import RewardTerms, standard_reward, team_reward
 from swarmloc.envs.specs import TaskSpec
 
 
@@ -57,19 +57,33 @@ class EpisodeRecorder:
                           "label": np.zeros((n_t, n, n_channels), dtype=bool)}
 
     def record(self, k: int, estimate: np.ndarray, truth: np.ndarray, valid: np.ndarray, label: np.ndarray,
-               applied: np.ndarray | None, previous: np.ndarray | None, flops: np.ndarray | None) -> None:
-        """Record update k (0-based) of every episode (``(B, N, ...)`` arrays)."""
+               applied: np.ndarray | None, previous: np.ndarray | None, flops: np.ndarray | None,
+               terms: RewardTerms | None = None) -> None:
+        """Record update k (0-based) of every episode (``(B, N, ...)`` arrays).
+
+        Args:
+            k: the update's index.
+            estimate, truth: ``(B, N, 3)`` positions.
+            valid: ``(B, N, L)`` measurements present in this update.
+            label: ``(B, N, L)`` their fault labels.
+            applied, previous: ``(B, N, L)`` trust applied now and before (None: not exposed).
+            flops: ``(B, N)`` total FLOPs of the step (None: not reported).
+            terms: the reward terms of this update as the env scored it (Track A); None for
+                an estimator (Track B), whose reward is computed here from the same
+                ``standard_reward``.
+        """
         s = self.spec
         self.errors[k] = M.position_errors(estimate, truth)
         if self._positions is not None:
             self._positions[0][k], self._positions[1][k] = estimate, truth
         self.label_steps[k] = label[:, self.nodes].any(axis=(1, 2))
-        # the reward counts every valid channel as used when the method exposes no trust
-        a = applied if applied is not None else np.ones(valid.shape)
-        p = previous if previous is not None else a
-        terms = standard_reward(estimate, truth, a, p, valid, s.filter.alpha_th,
-                                flops if flops is not None else np.zeros(estimate.shape[:2]))
-        self.team[k] = terms.reward.mean(axis=1)
+        if terms is None:
+            # the reward counts every valid channel as used when the method exposes no trust
+            a = applied if applied is not None else np.ones(valid.shape)
+            p = previous if previous is not None else a
+            terms = standard_reward(estimate, truth, a, p, valid, s.filter.alpha_th,
+                                    flops if flops is not None else np.zeros(estimate.shape[:2]))
+        self.team[k] = team_reward(terms)
         if self.scored_steps[k]:
             if flops is not None:
                 self.delay_ms += terms.delay_ms[:, self.nodes].mean(axis=1)

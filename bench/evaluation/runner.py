@@ -1,6 +1,6 @@
 """The evaluation runner: methods × suite → per-episode metrics → a results file.
 
-One task's seeds run as one batch (a ``LinkTrustCore`` for Track A, a ``World`` for
+One task's seeds run as one batch (a ``TrustEnvBatch`` for Track A, a ``World`` for
 Track B, B = number of seeds); tasks run in parallel worker processes (``workers``;
 spawn-safe top-level job functions, numba limited to one thread per worker). Every
 random draw is keyed by (seed, step, stream, index) and methods draw from per-episode
@@ -47,10 +47,9 @@ from swarmloc.bench.evaluation.recorder import EpisodeRecorder
 from swarmloc.bench.evaluation.results import METRIC_NAMES, MethodInfo, Results, SuiteInfo, make_results, write_results
 from swarmloc.bench.evaluation.suites import Suite, require_data
 from swarmloc.bench.evaluation.traces import Trace, read_traces, traces_path, write_traces
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.observation import build_observation, kind_one_hot
 from swarmloc.envs.specs import TaskSpec
 from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.trust_env import TrustEnvBatch
 from swarmloc.envs.world import World, validate_seeds
 
 MAX_WORKERS = 64
@@ -86,28 +85,28 @@ def _reset_or_unsupported(loaded: LoadedMethod, spec: TaskSpec, reset: Callable[
 
 
 def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, trace: bool) -> tuple[EpisodeRecorder, Any]:
-    """Run a Track A policy on B episodes through ``LinkTrustCore``."""
+    """Run a Track A policy on B episodes through ``TrustEnvBatch``, the env every adapter wraps.
+
+    Observation, reward, FLOPs and delay come from the env's ``step``: the numbers a
+    Gymnasium user sees are the numbers the leaderboard records.
+    """
     policy = loaded.method
     n_b = len(seeds)
-    core = LinkTrustCore(spec, n_b)
-    cs = core.reset(seeds)
-    layout = core.layout
+    env = TrustEnvBatch(spec, n_b, policy_flops_per_channel=float(getattr(policy, "flops_per_channel", 0.0)))
+    cs = env.reset(seeds)
+    layout = env.layout
     _reset_or_unsupported(loaded, spec, lambda: policy.reset(n_b, layout, episode_keys(seeds)))
-    one_hot = kind_one_hot(layout.kind)
     obs = None
-    fpc = float(getattr(policy, "flops_per_channel", 0.0))
-    rec = EpisodeRecorder(spec, seeds, getattr(core.world, "schedule", None), layout.n_channels, True, True, trace)
+    rec = EpisodeRecorder(spec, seeds, getattr(env.core.world, "schedule", None), layout.n_channels, True, True, trace)
     for k in range(spec.n_steps):
-        obs = build_observation(cs, one_hot, out=obs)
+        obs = env.observation(out=obs)
         inp = TrustInput.view(obs, cs.resid, cs.pred, cs.nis, cs.applied, cs.jerk, cs.valid,
                               (k + 1) * spec.dt, k + 1)
         if loaded.privileged:
-            policy.observe_privileged(PrivilegedInfo(labels=_readonly(core.world.buffers.label.copy())))
-        alpha = policy.act(inp)
-        valid = cs.valid.copy()
-        cs = core.step(alpha)
-        flops = cs.flops + fpc * valid.sum(axis=-1)
-        rec.record(k, cs.estimate, cs.truth, valid, cs.label, cs.applied, cs.prev_trust, flops)
+            policy.observe_privileged(PrivilegedInfo(labels=_readonly(env.pending_labels().copy())))
+        cs, terms = env.step(env.check(policy.act(inp)))
+        rec.record(k, cs.estimate, cs.truth, cs.update_valid, cs.label, cs.applied, cs.prev_trust, terms.flops,
+                   terms)
     return rec, layout
 
 

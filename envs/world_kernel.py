@@ -1,0 +1,346 @@
+"""The world kernel: one step of truth, IMU, channels and faults for one episode.
+
+``WorldInputs`` names the task, the episode state and the step buffers, the
+``FaultSchedule`` (``faults.py``) the episodes' fault windows; ``sense_episode(w, fs, b)``
+advances episode b by one step (``sense_batch`` does it for every episode) and
+``reset_episodes`` starts episodes at step 0. Every fault acts inside the kernel: range
+biases, Gauss–Markov NLOS, IMU cascades, camera and UWB outages, GPS drift, hybrid GPS
+noise, packet loss; visual odometry is sensed beside the truth. All draws come from the
+counter-based RNG (``rng.py``) keyed by (seed, step, stream, index), so the numbers do not
+depend on the batch, the thread or the order of evaluation.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from .channels import ANCHOR, LANDMARK, PEER, PEER_REL
+from .faults import BIAS_UNIFORM, FaultSchedule
+from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
+from .trajectories import truth_at
+
+LABEL_SIGMAS = 3.0  # an injected error above this many nominal σ is labelled a fault
+
+
+class WorldInputs(NamedTuple):
+    """Inputs, state and step buffers of the world kernel for B episodes of one task.
+
+    Shapes: B episodes, N UAVs, L channel slots per UAV, A anchors, M landmarks,
+    ``N_PARAMS`` trajectory parameters. The fault windows are the kernel's second argument,
+    a ``FaultSchedule``. Measurements are 3-vectors with scalar ranges in component 0.
+
+    Task (constant):
+        dt: step length [s].
+        traj_kind: trajectory kind id (``trajectories.py``); traj_prm ``(N, N_PARAMS)``.
+        anchors: ``(A, 3)``; landmarks ``(M, 3)`` [m].
+        kind, target: ``(N, L)`` int64 channel kind and the anchor / UAV / landmark it refers to.
+        linked: ``(N, L)`` bool, the topology connects the slot.
+        sigma: ``(N, L)`` nominal noise σ per scalar row [m].
+        imu_sigma: accelerometer noise σ [m/s²].
+        camera_range, peer_range: landmark and peer visibility radius [m].
+        has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
+
+    Episode state (changed by ``reset_episodes`` and ``sense_episode``):
+        seeds, steps: ``(B,)`` int64 episode seed and current step k (time k·dt).
+        imu_const_bias: ``(B, N, 3)`` constant accelerometer bias [m/s²].
+        velocity_bias: ``(B, N, 3)`` constant visual-odometry bias [m/s].
+        gm_bias, gm_left: ``(B, N, L)`` Gauss–Markov NLOS bias [m] and steps left in the episode.
+
+    Step buffers (written by ``sense_episode`` for step k):
+        pos, vel, acc: ``(B, N, 3)`` truth [m, m/s, m/s²].
+        imu: ``(B, N, 3)`` accelerometer reading for the interval (k−1, k] [m/s²].
+        z: ``(B, N, L, 3)`` measurements; valid, label ``(B, N, L)`` bool present / faulty.
+        injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
+        velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (zeros without the sensor).
+    """
+
+    dt: float
+    traj_kind: int
+    traj_prm: np.ndarray
+    anchors: np.ndarray
+    landmarks: np.ndarray
+    kind: np.ndarray
+    target: np.ndarray
+    linked: np.ndarray
+    sigma: np.ndarray
+    imu_sigma: float
+    camera_range: float
+    peer_range: float
+    has_velocity: bool
+    velocity_sigma: float
+    seeds: np.ndarray
+    steps: np.ndarray
+    imu_const_bias: np.ndarray
+    velocity_bias: np.ndarray
+    gm_bias: np.ndarray
+    gm_left: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    imu: np.ndarray
+    z: np.ndarray
+    valid: np.ndarray
+    label: np.ndarray
+    injected: np.ndarray
+    velocity: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _in_window(windows: np.ndarray, b: int, wi: int, t: float) -> bool:
+    """Whether t lies in window wi of episode b: ``windows[b, wi] = [start, end)``."""
+    return windows[b, wi, 0] <= t < windows[b, wi, 1]
+
+
+@njit(cache=True, inline="always")
+def _imu_faulty(fs: FaultSchedule, b: int, j: int, t: float) -> bool:
+    """UAV j of episode b is inside one of its IMU-fault windows at time t."""
+    for wi in range(fs.imu_time.shape[1]):
+        if fs.imu_nodes[b, wi, j] and _in_window(fs.imu_time, b, wi, t):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _truth_and_imu(w: WorldInputs, fs: FaultSchedule, b: int, k: int, t: float) -> None:
+    """Truth at step k and the IMU reading u = Δv/dt + biases + noise (the mean acceleration over the interval)."""
+    key = stream_key(w.seeds[b], k, Stream.IMU)
+    for i in range(w.pos.shape[1]):
+        v_prev0, v_prev1, v_prev2 = w.vel[b, i, 0], w.vel[b, i, 1], w.vel[b, i, 2]
+        truth_at(w.traj_kind, w.traj_prm[i], t, w.seeds[b], i, w.pos[b, i], w.vel[b, i], w.acc[b, i])
+        for d in range(3):
+            v_prev = v_prev0 if d == 0 else (v_prev1 if d == 1 else v_prev2)
+            u = (w.vel[b, i, d] - v_prev) / w.dt + w.imu_const_bias[b, i, d]
+            for wi in range(fs.imu_time.shape[1]):
+                if fs.imu_nodes[b, wi, i] and _in_window(fs.imu_time, b, wi, t):
+                    u += fs.imu_bias[b, wi, d]
+            w.imu[b, i, d] = u + w.imu_sigma * normal_at(key, i * 3 + d)
+
+
+@njit(cache=True, inline="always")
+def _visual_odometry(w: WorldInputs, b: int, k: int) -> None:
+    """v_vo = v + b + σ n, n ~ N(0, 1) keyed by (seed, step, VELOCITY, uav·3 + axis)."""
+    key = stream_key(w.seeds[b], k, Stream.VELOCITY)
+    for i in range(w.vel.shape[1]):
+        for d in range(3):
+            w.velocity[b, i, d] = w.vel[b, i, d] + w.velocity_bias[b, i, d] + w.velocity_sigma * normal_at(key, i * 3 + d)
+
+
+@njit(cache=True, inline="always")
+def _range_error(w: WorldInputs, fs: FaultSchedule, b: int, i: int, l: int, idx: int, t: float,
+                 key_uniform: np.uint64, key_onset: np.uint64, key_process: np.uint64, p_on: float, phi: float,
+                 gm_step_sigma: float) -> float:
+    """Injected error of range channel (i, l): scheduled / uniform NLOS windows plus Gauss–Markov NLOS."""
+    err = 0.0
+    for wi in range(fs.bias_time.shape[1]):
+        if fs.bias_mask[b, wi, i, l] and _in_window(fs.bias_time, b, wi, t):
+            if fs.bias_param[b, wi, 0] == BIAS_UNIFORM:
+                u = uniform_at(key_uniform, idx * 8 + wi)
+                err += fs.bias_param[b, wi, 1] + (fs.bias_param[b, wi, 2] - fs.bias_param[b, wi, 1]) * u
+            else:
+                err += fs.bias_param[b, wi, 1]
+    if fs.gm_mask[i, l]:
+        g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
+        if w.gm_left[b, i, l] <= 0.0:
+            w.gm_bias[b, i, l] = 0.0
+            if uniform_at(key_onset, 2 * idx) < p_on:
+                u = uniform_at(key_onset, 2 * idx + 1)
+                w.gm_left[b, i, l] = max(1.0, -g[1] * math.log(u) / w.dt)
+                bb = g[2] + g[3] * normal_at(key_process, idx)
+                w.gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
+        else:
+            # b ← μ + φ(b − μ) + σ√(1−φ²)·n, φ = exp(−dt/τ)
+            bb = g[2] + phi * (w.gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, idx)
+            w.gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
+            w.gm_left[b, i, l] -= 1.0
+        if w.gm_left[b, i, l] > 0.0:
+            err += w.gm_bias[b, i, l]
+    return err
+
+
+@njit(cache=True, inline="always")
+def _gps(w: WorldInputs, fs: FaultSchedule, b: int, i: int, l: int, idx: int, t: float, key_gps: np.uint64,
+         key_mix: np.uint64) -> float:
+    """Write GPS fix (i, l) = p + drift + noise; returns the squared drift [m²]."""
+    sg = w.sigma[i, l]
+    drift2 = 0.0
+    for d in range(3):
+        drift = 0.0
+        for wi in range(fs.drift_time.shape[1]):
+            if fs.drift_nodes[b, wi, i] and t >= fs.drift_time[b, wi, 0]:
+                drift += fs.drift_rate[b, wi, d] * (min(t, fs.drift_time[b, wi, 1]) - fs.drift_time[b, wi, 0])
+        drift2 += drift * drift
+        if fs.hybrid_nodes[i]:
+            # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
+            h = fs.hybrid_param
+            ratio = h[0]
+            lo, hi = int(h[3]), int(h[4])
+            nu = lo + int(uniform_at(key_mix, idx * 3 + d) * (hi - lo + 1))
+            noise = ratio * h[1] * student_t_at(key_gps, idx * 3 + d, nu) \
+                + (1.0 - ratio) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
+        else:
+            noise = sg * normal_at(key_gps, idx * 3 + d)
+        w.z[b, i, l, d] = w.pos[b, i, d] + drift + noise
+    return drift2
+
+
+@njit(cache=True, inline="always")
+def sense_episode(w: WorldInputs, fs: FaultSchedule, b: int) -> None:
+    """Advance episode b by one step: truth, IMU, visual odometry and every channel with its faults."""
+    w.steps[b] += 1
+    k = w.steps[b]
+    t = k * w.dt
+    seed = w.seeds[b]
+    _truth_and_imu(w, fs, b, k, t)
+    if w.has_velocity:
+        _visual_odometry(w, b, k)
+    # one hash prefix per stream and step (rng.stream_key): each draw then costs one round
+    key_anchor = stream_key(seed, k, Stream.ANCHOR)
+    key_peer = stream_key(seed, k, Stream.PEER)
+    key_landmark = stream_key(seed, k, Stream.LANDMARK)
+    key_gps = stream_key(seed, k, Stream.GPS)
+    key_mix = stream_key(seed, k, Stream.HYBRID_MIX)
+    key_loss = stream_key(seed, k, Stream.PACKET_LOSS)
+    key_onset = stream_key(seed, k, Stream.NLOS_ONSET)
+    key_process = stream_key(seed, k, Stream.NLOS_PROCESS)
+    key_uniform = stream_key(seed, k, Stream.NLOS_UNIFORM)
+    # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
+    # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
+    p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
+    if fs.gm_param[4] > 0.0:
+        p_on = 1.0 - math.exp(-fs.gm_param[0] * w.dt)
+        phi = math.exp(-w.dt / fs.gm_param[4])
+        gm_step_sigma = fs.gm_param[3] * math.sqrt(1.0 - phi * phi)
+    n, n_l = w.z.shape[1], w.z.shape[2]
+    for i in range(n):
+        blind = False
+        for wi in range(fs.imu_time.shape[1]):
+            if fs.imu_drop[b, wi] and fs.imu_nodes[b, wi, i] and _in_window(fs.imu_time, b, wi, t):
+                blind = True
+        vision_out = False
+        for wi in range(fs.outage_time.shape[1]):
+            if fs.outage_nodes[b, wi, i] and _in_window(fs.outage_time, b, wi, t):
+                vision_out = True
+        for l in range(n_l):
+            ch = w.kind[i, l]
+            j = w.target[i, l]
+            idx = i * n_l + l
+            sg = w.sigma[i, l]
+            ok = w.linked[i, l]
+            err = 0.0
+            lab = False
+            if ch == ANCHOR or ch == PEER:
+                if ch == ANCHOR:
+                    dx = w.pos[b, i, 0] - w.anchors[j, 0]
+                    dy = w.pos[b, i, 1] - w.anchors[j, 1]
+                    dz = w.pos[b, i, 2] - w.anchors[j, 2]
+                else:
+                    dx = w.pos[b, i, 0] - w.pos[b, j, 0]
+                    dy = w.pos[b, i, 1] - w.pos[b, j, 1]
+                    dz = w.pos[b, i, 2] - w.pos[b, j, 2]
+                rng = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if ch == PEER and rng > w.peer_range:
+                    ok = False
+                err = _range_error(w, fs, b, i, l, idx, t, key_uniform, key_onset, key_process, p_on, phi,
+                                   gm_step_sigma)
+                key = key_anchor if ch == ANCHOR else key_peer
+                w.z[b, i, l, 0] = rng + err + sg * normal_at(key, idx)
+                w.z[b, i, l, 1] = 0.0
+                w.z[b, i, l, 2] = 0.0
+                lab = err > LABEL_SIGMAS * sg
+                if ch == PEER:
+                    lab = lab or _imu_faulty(fs, b, j, t)
+            elif ch == LANDMARK:
+                dist2 = 0.0
+                for d in range(3):
+                    rel = w.landmarks[j, d] - w.pos[b, i, d]
+                    dist2 += rel * rel
+                    w.z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
+                if vision_out or dist2 > w.camera_range * w.camera_range:
+                    ok = False
+            elif ch == PEER_REL:
+                for d in range(3):
+                    w.z[b, i, l, d] = w.pos[b, j, d] - w.pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
+                lab = _imu_faulty(fs, b, j, t)
+            else:  # GPS
+                drift2 = _gps(w, fs, b, i, l, idx, t, key_gps, key_mix)
+                err = math.sqrt(drift2)
+                lab = drift2 > 0.0  # a drifting fix is faulty from the first centimetre
+            if blind:
+                ok = False
+            for wi in range(fs.uwb_time.shape[1]):
+                if fs.uwb_mask[b, wi, i, l] and _in_window(fs.uwb_time, b, wi, t):
+                    ok = False
+            if ok and fs.packet_loss > 0.0 and uniform_at(key_loss, idx) < fs.packet_loss:
+                ok = False
+            w.valid[b, i, l] = ok
+            w.label[b, i, l] = lab and ok
+            w.injected[b, i, l] = err
+
+
+#: episodes per parallel block. A prange body must not touch a named tuple's fields itself
+#: (numba 0.68 drops the writes, or refuses a nested tuple): each block calls a compiled
+#: function that loops over its episodes.
+BLOCK = 16
+
+
+@njit(cache=True, inline="always")
+def block_bounds(block: int, n: int) -> tuple[int, int]:
+    """Episodes [lo, hi) of parallel block ``block`` out of a batch of n."""
+    return block * BLOCK, min((block + 1) * BLOCK, n)
+
+
+@njit(cache=True)
+def sense_episodes(w: WorldInputs, fs: FaultSchedule, lo: int, hi: int) -> None:
+    """Advance episodes lo..hi−1 by one step, on the calling thread."""
+    for b in range(lo, hi):
+        sense_episode(w, fs, b)
+
+
+@njit(cache=True, parallel=True)
+def sense_batch(w: WorldInputs, fs: FaultSchedule) -> None:
+    """Advance every episode by one step, threads over blocks of episodes."""
+    n_b = w.steps.shape[0]
+    for block in prange((n_b + BLOCK - 1) // BLOCK):
+        lo, hi = block_bounds(block, n_b)
+        sense_episodes(w, fs, lo, hi)
+
+
+@njit(cache=True)
+def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, velocity_bias_sigma: float,
+                   init_pos_sigma: float, init_vel_sigma: float, x0: np.ndarray) -> None:
+    """Start episodes ``idx`` at step 0 (their seeds and fault windows already set).
+
+    Writes the truth at t = 0, the per-episode constant biases and the initial prior mean
+    ``x0`` ``(B, N, 6)`` [p, v]: the truth perturbed by the stated initial uncertainty.
+    Nothing of the previous episode leaks into the next: the step buffers are cleared (the
+    first jerk feature is ‖u(1) − u(0)‖ with u(0) = 0).
+    """
+    n = w.pos.shape[1]
+    for e in range(idx.shape[0]):
+        b = idx[e]
+        seed = w.seeds[b]
+        w.steps[b] = 0
+        key = stream_key(seed, 0, Stream.INIT)
+        key_vo = stream_key(seed, 0, Stream.VELOCITY)
+        for i in range(n):
+            truth_at(w.traj_kind, w.traj_prm[i], 0.0, seed, i, w.pos[b, i], w.vel[b, i], w.acc[b, i])
+            for d in range(3):
+                w.imu_const_bias[b, i, d] = imu_bias_sigma * normal_at(key, 100 + i * 3 + d)
+                x0[b, i, d] = w.pos[b, i, d] + init_pos_sigma * normal_at(key, 10_000 + i * 6 + d)
+                x0[b, i, 3 + d] = w.vel[b, i, d] + init_vel_sigma * normal_at(key, 10_003 + i * 6 + d)
+                w.imu[b, i, d] = 0.0
+                w.velocity_bias[b, i, d] = 0.0
+                w.velocity[b, i, d] = 0.0
+                if w.has_velocity:
+                    w.velocity_bias[b, i, d] = velocity_bias_sigma * normal_at(key_vo, 1_000_000 + i * 3 + d)
+                    w.velocity[b, i, d] = w.vel[b, i, d] + w.velocity_bias[b, i, d]
+        w.z[b] = 0.0
+        w.injected[b] = 0.0
+        w.valid[b] = False
+        w.label[b] = False
+        w.gm_bias[b] = 0.0
+        w.gm_left[b] = 0.0
