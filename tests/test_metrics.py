@@ -93,6 +93,7 @@ def test_team_return_and_normalized_score():
     # oracle no better than uniform (by less than 1 mm): undefined
     assert M.normalized_score(1.0, 2.0, 2.0) is None
     assert M.normalized_score(1.0, 2.0, 1.9995) is None
+    assert M.normalized_score(1.0, float("nan"), 0.5) is None  # no defined reference, no score
 
 
 def test_channel_stats_equal_pure_functions():

@@ -25,16 +25,6 @@ def test_iqm_against_hand_computed_case() -> None:
     assert stats.iqm([1.0, 2.0, 6.0]) == 3.0
 
 
-def test_normalized_score_zero_for_uniform_one_for_oracle() -> None:
-    assert stats.normalized_score(2.0, rmse_uniform=2.0, rmse_oracle=0.5) == 0.0
-    assert stats.normalized_score(0.5, rmse_uniform=2.0, rmse_oracle=0.5) == 1.0
-    assert stats.normalized_score(1.25, 2.0, 0.5) == pytest.approx(0.5)
-    assert stats.normalized_score(3.5, 2.0, 0.5) == pytest.approx(-1.0)
-    np.testing.assert_allclose(stats.normalized_score([2.0, 0.5], [2.0, 2.0], [0.5, 0.5]), [0.0, 1.0])
-    with pytest.raises(ValueError, match="uniform RMSE .* equals oracle RMSE"):
-        stats.normalized_score(1.0, 1.0, 1.0)
-
-
 def test_bootstrap_is_seeded_order_independent_and_covers_the_mean() -> None:
     rng = np.random.default_rng(3)
     x = rng.normal(1.0, 0.3, size=20)

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.bench.evaluation.stats import normalized_score as _normalized_score
 
 #: an error above this at any time marks the episode diverged [m]
 DIVERGENCE_M = 10.0
@@ -210,9 +209,11 @@ def normalized_score(rmse_method: float, rmse_uniform: float, rmse_oracle: float
     """
     if not (np.isfinite(rmse_uniform) and np.isfinite(rmse_oracle) and np.isfinite(rmse_method)):
         return None
-    if rmse_uniform - rmse_oracle < min_gap:
+    gap = rmse_uniform - rmse_oracle
+    if gap < min_gap:
         return None
-    return float(_normalized_score(rmse_method, rmse_uniform, rmse_oracle))
+    # (uniform − method) / (uniform − oracle): 0 as good as uniform, 1 as good as the oracle
+    return float((rmse_uniform - rmse_method) / gap)
 
 
 class ChannelStats:

@@ -148,38 +148,6 @@ def summarize(
     return Aggregate(mean=mean(x), iqm=iqm(x), ci_low=low, ci_high=high)
 
 
-def normalized_score(
-    rmse_method: ArrayLike, rmse_uniform: ArrayLike, rmse_oracle: ArrayLike
-) -> Any:
-    """D4RL-style normalized score: ``(uniform − method) / (uniform − oracle)``.
-
-    0 means as good as uniform-trust CEKF, 1 as good as the privileged oracle trust;
-    it can be negative (worse than uniform) or above 1.
-
-    Args:
-        rmse_method: RMSE of the scored method (scalar or array).
-        rmse_uniform: RMSE of uniform trust on the same episode(s).
-        rmse_oracle: RMSE of oracle trust on the same episode(s).
-
-    Returns:
-        A float for scalar inputs, else an array.
-
-    Raises:
-        ValueError: where uniform and oracle RMSE are equal (the score is undefined).
-    """
-    m = np.asarray(rmse_method, dtype=np.float64)
-    u = np.asarray(rmse_uniform, dtype=np.float64)
-    o = np.asarray(rmse_oracle, dtype=np.float64)
-    span = u - o
-    if np.any(span == 0.0):
-        raise ValueError(
-            f"normalized score undefined: uniform RMSE {u.tolist()} equals oracle RMSE "
-            f"{o.tolist()}; they must differ"
-        )
-    score = (u - m) / span
-    return float(score) if score.ndim == 0 else score
-
-
 def _episode_parts(episode: Episode | Mapping[str, Any]) -> tuple[str, int, Mapping[str, Any]]:
     if isinstance(episode, Episode):
         return episode.task, episode.seed, episode.metrics.model_dump()
@@ -272,6 +240,5 @@ __all__ = [
     "bootstrap_ci",
     "iqm",
     "mean",
-    "normalized_score",
     "summarize",
 ]
