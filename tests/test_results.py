@@ -86,7 +86,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None
         (b"\xff\xfe garbage", "not UTF-8"),
         (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
-        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema_version 1"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2 \\(the file was written by a newer swarmloc: upgrade"),
     ],
 )
 def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:

@@ -123,7 +123,8 @@ class EpisodeRecorder:
             self._positions = None
 
     def episode_metrics(self, b: int) -> dict[str, float | None]:
-        """Every metric of episode b except ``normalized_score`` (None here)."""
+        """Every metric of episode b except those against references (``normalized_score``, ``uniform_rmse``,
+        ``bound_rmse``: None here, filled in by the runner)."""
         self._apply_alignment()
         s = self.spec
         steps = self.scored_steps
@@ -150,6 +151,8 @@ class EpisodeRecorder:
             "anomaly_detection_rate": self.stats.anomaly_detection_rate(b) if self.stats is not None else None,
             "team_return": M.team_return(self.team[:, b]),
             "normalized_score": None,
+            "uniform_rmse": None,
+            "bound_rmse": None,
         }
         return out
 

@@ -3,7 +3,7 @@
 One JSON document per (method, suite) evaluation, with exactly this top-level shape::
 
     {
-      "schema_version": 1,
+      "schema_version": 2,
       "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
       "suite":      {"name", "version", "sha256"},
       "provenance": {"package_version", "git_commit", "created_utc",
@@ -44,8 +44,14 @@ from pydantic import (
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
 
-SCHEMA_VERSION: Literal[1] = 1
-"""Version of the results-file schema written by this module; bump on any change."""
+SCHEMA_VERSION: Literal[2] = 2
+"""Version of the results-file schema written by this module; bump on any change.
+
+Version history: 1 — v0 metrics; 2 — adds ``uniform_rmse`` (the standard CEKF on the same
+episode, the reference of score v1) and ``bound_rmse`` (the episode's information bound).
+"""
+#: schema versions this module reads (a version-1 file reads with the version-2 metrics null)
+READABLE_SCHEMA_VERSIONS = (1, 2)
 
 METRIC_NAMES: tuple[str, ...] = (
     "rmse",
@@ -63,8 +69,12 @@ METRIC_NAMES: tuple[str, ...] = (
     "anomaly_detection_rate",
     "team_return",
     "normalized_score",
+    "uniform_rmse",
+    "bound_rmse",
 )
 """Every per-episode metric, in the order they appear in results files."""
+METRIC_NAMES_V1: tuple[str, ...] = METRIC_NAMES[:METRIC_NAMES.index("uniform_rmse")]
+"""The metrics of schema version 1."""
 
 AGGREGATE_FIELDS: tuple[str, ...] = ("mean", "iqm", "ci_low", "ci_high")
 """Statistics kept per (task, metric): mean, interquartile mean, 95 % bootstrap CI of the mean."""
@@ -145,6 +155,8 @@ class EpisodeMetrics(BaseModel):
     anomaly_detection_rate: MetricValue
     team_return: MetricValue
     normalized_score: MetricValue
+    uniform_rmse: MetricValue = None
+    bound_rmse: MetricValue = None
 
     @classmethod
     def of(cls, **known: float | None) -> EpisodeMetrics:
@@ -185,12 +197,22 @@ class Results(BaseModel):
 
     model_config = _FROZEN
 
-    schema_version: Literal[1] = SCHEMA_VERSION
+    schema_version: Literal[1, 2] = SCHEMA_VERSION
     method: MethodInfo
     suite: SuiteInfo
     provenance: Provenance
     episodes: list[Episode] = Field(min_length=1)
     aggregates: dict[str, dict[str, Aggregate | None]]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _read_version_1(cls, raw: Any) -> Any:
+        """A version-1 file has no version-2 metrics: they read as null (aggregates included)."""
+        if isinstance(raw, dict) and raw.get("schema_version") == 1 and isinstance(raw.get("aggregates"), dict):
+            added = {name: None for name in METRIC_NAMES if name not in METRIC_NAMES_V1}
+            raw = {**raw, "aggregates": {task: ({**added, **per} if isinstance(per, dict) else per)
+                                         for task, per in raw["aggregates"].items()}}
+        return raw
 
     @model_validator(mode="after")
     def _consistent(self) -> Results:
@@ -353,10 +375,12 @@ def parse_results(text: str | bytes, source: str = "<results>") -> Results:
             f"results file {source} must hold a JSON object, got {type(raw).__name__}"
         )
     version = raw.get("schema_version")
-    if version != SCHEMA_VERSION:
+    if version not in READABLE_SCHEMA_VERSIONS:
+        newer = isinstance(version, int) and version > SCHEMA_VERSION
         raise ResultsFileError(
-            f"results file {source} has schema_version {version!r}; this swarmloc reads "
-            f"schema_version {SCHEMA_VERSION} only"
+            f"results file {source} has schema_version {version!r}; this swarmloc reads schema versions "
+            f"{', '.join(map(str, READABLE_SCHEMA_VERSIONS))}"
+            + (" (the file was written by a newer swarmloc: upgrade to read it)" if newer else "")
         )
     try:
         return Results.model_validate(raw)

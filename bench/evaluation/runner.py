@@ -1,11 +1,12 @@
 """The evaluation runner: methods × suite → per-episode metrics → a results file.
 
 One task's seeds run as one batch (a ``TrustEnvBatch`` for Track A, a ``World`` for
-Track B, B = number of seeds); tasks run in parallel worker processes (``workers``;
-spawn-safe top-level job functions, numba limited to one thread per worker). Every
-random draw is keyed by (seed, step, stream, index) and methods draw from per-episode
-keys, so an episode's metrics are identical alone or batched, in any process — which is
-what lets the leaderboard's verifier re-run a sample with :func:`run_episodes`.
+Track B, B = number of seeds); a suite runs as (method, task, seed-chunk) jobs on an
+execution backend, ``serial``, ``process`` or ``ray`` (``backends.py``; the chunks come
+back together in ``outcomes.py``). Every random draw is keyed by (seed, step, stream,
+index) and methods draw from per-episode keys, so an episode's metrics are identical
+alone or batched, in any process, on any backend — which is what lets the leaderboard's
+verifier re-run a sample with :func:`run_episodes`.
 
 **Normalized score.** Each episode's score compares its RMSE with the RMSE of the two
 reference methods, ``uniform`` (score 0) and the privileged ``oracle`` (score 1), run
@@ -21,12 +22,9 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import multiprocessing
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +41,17 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.evaluation.backends import BACKENDS, MAX_WORKERS, Backend, Job, JobFailure, check_backend, run_jobs
+from swarmloc.bench.evaluation.outcomes import (
+    EvaluationFailed,
+    Gathered,
+    MethodRun,
+    TaskOutcome,
+    method_info,
+    suite_info,
+)
 from swarmloc.bench.evaluation.recorder import EpisodeRecorder
-from swarmloc.bench.evaluation.results import METRIC_NAMES, MethodInfo, Results, SuiteInfo, make_results, write_results
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, write_results
 from swarmloc.bench.evaluation.suites import Suite, require_data
 from swarmloc.bench.evaluation.traces import Trace, read_traces, traces_path, write_traces
 from swarmloc.envs.specs import TaskSpec
@@ -52,7 +59,6 @@ from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.trust_env import TrustEnvBatch
 from swarmloc.envs.world import World, validate_seeds
 
-MAX_WORKERS = 64
 _Recorder = EpisodeRecorder  # former private name, kept for existing imports
 
 
@@ -221,26 +227,6 @@ def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[floa
     return [_REFERENCE_CACHE[(name, key, int(s))] for s in seeds]
 
 
-@dataclass
-class TaskOutcome:
-    """Per-episode results of several methods on one task's seeds.
-
-    Attributes:
-        task: task ID; seeds: the seeds, in order.
-        episodes: method → one metrics dict per seed.
-        traces: method → trace of the first seed (when requested).
-        unsupported: method → why it cannot run this task (its metrics are all null).
-        cpu_seconds: method → CPU time of its rollout (references excluded).
-    """
-
-    task: str
-    seeds: list[int]
-    episodes: dict[str, list[dict[str, float | None]]] = field(default_factory=dict)
-    traces: dict[str, Trace] = field(default_factory=dict)
-    unsupported: dict[str, str] = field(default_factory=dict)
-    cpu_seconds: dict[str, float] = field(default_factory=dict)
-
-
 def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[int], *,
                   weights: Mapping[str, str | None] | None = None, trace: bool = False) -> TaskOutcome:
     """Evaluate methods on one task's seeds (one batch per method), normalized scores included.
@@ -283,6 +269,7 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
         for m, u, o in zip(metrics, uniform, oracle):
             if m["rmse"] is not None:
                 m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
+                m["uniform_rmse"] = u  # the reference of score v1 (swarmloc.bench.evaluation.score)
     return outcome
 
 
@@ -313,20 +300,16 @@ def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | No
             for t, s in episodes]
 
 
-# --------------------------------------------------------------------------- suites, in parallel
+# --------------------------------------------------------------------------- suites, on a backend
+
+SEEDS_PER_JOB = 8
+"""A suite task's seeds run in chunks of this many, one job (and one batch) per chunk and method."""
 
 
-def _worker_init() -> None:
-    """Spawned workers run numba single-threaded: the parallelism is across tasks."""
-    import numba
-
-    numba.set_num_threads(1)
-
-
-def _task_job(methods: list[str], task: str, seeds: list[int], weights: dict[str, str | None],
-              trace: bool) -> TaskOutcome:
-    """Top-level (picklable) job: some methods on one task's seeds."""
-    return evaluate_task(methods, task, seeds, weights=weights, trace=trace)
+def _task_job(job: Job, weights: str | None) -> TaskOutcome:
+    """The runner's job function (top level, so that workers unpickle it): one method on a chunk of seeds."""
+    spec = get_spec(job.task, **(job.overrides or {}))
+    return evaluate_task([job.method], spec, job.seeds, weights={job.method: weights}, trace=job.trace)
 
 
 def _task_cost(task: str, n_seeds: int) -> float:
@@ -334,73 +317,59 @@ def _task_cost(task: str, n_seeds: int) -> float:
     return float(s.n_steps * s.n_uav * (s.n_channels + 4) * n_seeds)
 
 
-def _merge(into: TaskOutcome, part: TaskOutcome) -> None:
-    """Add a job's methods to the task's outcome."""
-    into.episodes.update(part.episodes)
-    into.traces.update(part.traces)
-    into.unsupported.update(part.unsupported)
-    into.cpu_seconds.update(part.cpu_seconds)
-
-
-@dataclass
-class MethodRun:
-    """One method's evaluation on a suite.
-
-    Attributes:
-        loaded: the method's metadata (and an instance, unused after loading).
-        episodes: ``[{"task", "seed", "metrics"}]`` in suite order.
-        traces: first-seed traces per task.
-        weights: the weights file, if any.
-        unsupported: task → why the method cannot run it (null metrics there).
-        cpu_seconds: CPU time of its rollouts over the suite.
-    """
-
-    loaded: LoadedMethod
-    episodes: list[dict[str, Any]]
-    traces: list[Trace]
-    weights: str | None = None
-    unsupported: dict[str, str] = field(default_factory=dict)
-    cpu_seconds: float = 0.0
-
-    def results(self, suite: Suite) -> Results:
-        """Assemble the results file (aggregates, provenance) of this run."""
-        return make_results(method_info(self.loaded, self.weights), suite_info(suite), self.episodes)
-
-
-def method_info(loaded: LoadedMethod, weights: str | None = None) -> MethodInfo:
-    """The results-file description of a loaded method."""
-    digest = None
-    if weights is not None:
-        digest = hashlib.sha256(Path(weights).read_bytes()).hexdigest()
-    return MethodInfo(name=loaded.name, entry_point=loaded.entry_point, weights_sha256=digest,
-                      privileged=loaded.privileged, track=loaded.track, deterministic=loaded.deterministic)
-
-
-def suite_info(suite: Suite) -> SuiteInfo:
-    """The results-file description of a suite."""
-    return SuiteInfo(name=suite.name, version=suite.version, sha256=suite.sha256)
-
-
-def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
-                     weights: Mapping[str, str | None] | None = None, trace: bool = True,
-                     progress: bool = True,
-                     on_task: Callable[[TaskOutcome], None] | None = None) -> dict[str, MethodRun]:
-    """Evaluate several methods on a suite, (task, method) runs in parallel.
+def make_jobs(methods: Sequence[str], suite: Suite, seeds_per_job: int = SEEDS_PER_JOB, trace: bool = True,
+              overrides: Mapping[str, Any] | None = None) -> list[Job]:
+    """The jobs of a suite evaluation: every method on every chunk of every task's seeds, costliest task first.
 
     Args:
         methods: method names or entry points.
         suite: the suite.
-        workers: worker processes (1 = run here, no pool), in [1, 64].
+        seeds_per_job: seeds per chunk, at least 1.
+        trace: mark each task's first chunk to keep the trace of the task's first seed.
+        overrides: task-spec overrides for every job (None: the registered tasks).
+
+    Returns:
+        The jobs, in the order to start them.
+    """
+    if seeds_per_job < 1:
+        raise ValueError(f"seeds_per_job must be at least 1, got {seeds_per_job}")
+    jobs = []
+    for task in sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t)))):
+        seeds = suite.seeds(task)
+        for start in range(0, len(seeds), seeds_per_job):
+            chunk = tuple(seeds[start:start + seeds_per_job])
+            jobs += [Job(task, m, chunk, trace and start == 0, overrides) for m in methods]
+    return jobs
+
+
+def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, backend: Backend | None = None,
+                     address: str | None = None, seeds_per_job: int = SEEDS_PER_JOB,
+                     weights: Mapping[str, str | None] | None = None, trace: bool = True, progress: bool = True,
+                     on_task: Callable[[TaskOutcome], None] | None = None,
+                     overrides: Mapping[str, Any] | None = None) -> dict[str, MethodRun]:
+    """Evaluate several methods on a suite: (method, task, seed-chunk) jobs on an execution backend.
+
+    Every backend gives identical per-episode metrics (see ``backends``). A job that
+    fails is reported (``MethodRun.failed``) and the other jobs go on.
+
+    Args:
+        methods: method names or entry points.
+        suite: the suite.
+        workers: worker processes (``process``) or CPUs of a local Ray cluster, in [1, 64].
+        backend: ``serial``, ``process`` or ``ray``; default ``serial`` for one worker, else ``process``.
+        address: Ray cluster to join, ``auto`` or ``HOST:PORT`` (``ray`` only; default: a local one).
+        seeds_per_job: seeds per job (one batch each).
         weights: optional method → weights file.
         trace: keep first-seed traces for plots.
         progress: show a progress bar (tqdm, on stderr).
-        on_task: called with each task's outcome once all its methods are done.
+        on_task: called with each task's outcome once all its jobs are done.
+        overrides: task-spec overrides for every task (shortened episodes in tests; the
+            results are then not the suite's).
 
     Returns:
         method → ``MethodRun``, episodes in suite order.
     """
-    if not 1 <= workers <= MAX_WORKERS:
-        raise ValueError(f"workers must be in [1, {MAX_WORKERS}], got {workers}")
+    backend = check_backend(backend, workers, address)
     if not methods:
         raise ValueError("no method to evaluate")
     from tqdm.auto import tqdm
@@ -408,89 +377,113 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1,
     weights = {m: (str(w) if w is not None else None) for m, w in (weights or {}).items()}
     loaded = {m: load_method(m, weights.get(m)) for m in methods}  # fail fast, before any work
     require_data(suite)  # a recorded task whose data is not imported here: say so before any work
-    # one job per (task, method): the pool balances methods of very different cost; the
-    # references of the normalized score are cached per worker process
-    tasks = sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t))))
-    jobs = [(task, m) for task in tasks for m in methods] if workers > 1 else [(task, None) for task in tasks]
-    outcomes = {task: TaskOutcome(task=task, seeds=suite.seeds(task)) for task in suite.tasks}
-    pending = {task: len(methods) for task in suite.tasks}
+    # one job per (method, task, seed chunk): the workers balance methods of very different
+    # cost; the references of the normalized score are cached per worker process
+    jobs = make_jobs(methods, suite, seeds_per_job, trace, overrides)
+    left = {task: sum(j.task == task for j in jobs) for task in suite.tasks}
+    gathered = Gathered()
     label = methods[0] if len(methods) == 1 else f"{len(methods)} methods"
-    bar = tqdm(total=len(suite.tasks) * len(methods), desc=f"evaluating {label} on {suite.name}",
-               unit="run", disable=not progress)
+    bar = tqdm(total=len(jobs), desc=f"evaluating {label} on {suite.name} ({backend})", unit="job",
+               disable=not progress)
 
-    def done(part: TaskOutcome) -> None:
-        _merge(outcomes[part.task], part)
-        pending[part.task] -= len(part.episodes)
-        bar.update(len(part.episodes))
-        bar.set_postfix_str(part.task.removeprefix("swarmloc/"))
-        if on_task is not None and pending[part.task] == 0:
-            on_task(outcomes[part.task])
+    def finished(job: Job) -> None:
+        left[job.task] -= 1
+        bar.update(1)
+        bar.set_postfix_str(job.task.removeprefix("swarmloc/"))
+        if on_task is not None and left[job.task] == 0:
+            on_task(gathered.outcome(job.task, suite.seeds(job.task), methods))
+
+    def on_result(job: Job, part: TaskOutcome) -> None:
+        gathered.add(job, part)
+        finished(job)
+
+    def on_failure(failure: JobFailure) -> None:
+        job = failure.job
+        gathered.failed.setdefault((job.method, job.task), failure.error)
+        bar.write(f"failed: {job.method} on {job.task} (seeds {job.seeds[0]}…{job.seeds[-1]}): {failure.error}")
+        finished(job)
 
     try:
-        if workers == 1:
-            for task, _ in jobs:
-                done(_task_job(list(methods), task, suite.seeds(task), weights, trace))
-        else:
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-                futures = [pool.submit(_task_job, [m], task, suite.seeds(task), weights, trace) for task, m in jobs]
-                for future in as_completed(futures):
-                    done(future.result())
+        run_jobs(_task_job, jobs, backend=backend, workers=workers, weights=weights, address=address,
+                 on_result=on_result, on_failure=on_failure)
     finally:
         bar.close()
-    runs = {}
-    for m in methods:
-        episodes = []
-        traces = []
-        for task in suite.tasks:
-            out = outcomes[task]
-            episodes += [{"task": task, "seed": s, "metrics": met} for s, met in zip(out.seeds, out.episodes[m])]
-            if m in out.traces:
-                traces.append(out.traces[m])
-        unsupported = {t: outcomes[t].unsupported[m] for t in suite.tasks if m in outcomes[t].unsupported}
-        runs[m] = MethodRun(loaded=loaded[m], episodes=episodes, traces=traces, weights=weights.get(m),
-                            unsupported=unsupported,
-                            cpu_seconds=sum(outcomes[t].cpu_seconds.get(m, 0.0) for t in suite.tasks))
-    return runs
+    return {m: gathered.run(m, loaded[m], suite, weights.get(m)) for m in methods}
+
+
+def partial_path(out: str | os.PathLike[str]) -> Path:
+    """Where ``evaluate`` puts the results of the tasks that did not fail: ``<stem>.partial.json``."""
+    out = Path(out)
+    return out.with_name(out.name.removesuffix(".json") + ".partial.json")
 
 
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,
-             weights: str | None = None, progress: bool = True, trace: bool = True) -> Results:
+             backend: Backend | None = None, address: str | None = None, weights: str | None = None,
+             progress: bool = True, trace: bool = True) -> Results:
     """Evaluate one method on a suite and (optionally) write the results file.
+
+    The file is written atomically once every job is done: an interrupted evaluation
+    (Ctrl-C) leaves no results file, a failed one leaves only ``<stem>.partial.json``.
 
     Args:
         method: registered name or entry point.
         suite: the suite.
         out: results file to write atomically (traces go to ``<stem>.traces.npz`` beside it).
-        workers: worker processes.
+        workers: worker processes (or CPUs of a local Ray cluster).
+        backend: ``serial``, ``process`` or ``ray`` (see ``evaluate_methods``).
+        address: Ray cluster to join (``ray`` only).
         weights: optional weights file.
         progress: show a progress bar.
         trace: keep first-seed traces (written only with ``out``).
 
     Returns:
         The validated ``Results``.
+
+    Raises:
+        EvaluationFailed: a job failed; the other tasks' results are in its ``partial``
+            (and, with ``out``, written to ``partial_path(out)``).
     """
-    run = evaluate_methods([method], suite, workers=workers, weights={method: weights}, trace=trace,
-                           progress=progress)[method]
+    run = evaluate_methods([method], suite, workers=workers, backend=backend, address=address,
+                           weights={method: weights}, trace=trace, progress=progress)[method]
+    if run.failed:
+        partial = run.partial_results(suite)
+        written = None
+        if out is not None and partial is not None:
+            written = _write(partial_path(out), partial, run.traces)
+        raise EvaluationFailed(run.loaded.name, run.failed, partial, written)
     results = run.results(suite)
     if out is not None:
-        write_results(out, results)
-        if run.traces:
-            write_traces(traces_path(out), run.traces)
+        _write(out, results, run.traces)
     return results
 
 
+def _write(out: str | os.PathLike[str], results: Results, traces: list[Trace]) -> Path:
+    """Traces first, then the results file: a results file never lacks its traces."""
+    if traces:
+        write_traces(traces_path(out), traces)
+    write_results(out, results)
+    return Path(out)
+
+
 __all__ = [
+    "BACKENDS",
+    "MAX_WORKERS",
+    "EvaluationFailed",
+    "Job",
     "MethodRun",
     "TaskOutcome",
     "Trace",
     "evaluate",
     "evaluate_methods",
     "evaluate_task",
+    "make_jobs",
+    "method_info",
+    "partial_path",
     "read_traces",
     "reference_rmse",
     "rollout",
     "run_episodes",
+    "suite_info",
     "traces_path",
     "write_traces",
 ]
