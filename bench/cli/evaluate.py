@@ -7,6 +7,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 
 @dataclass
@@ -22,7 +23,14 @@ class Options:
     tasks: str | None = None
     """Only these tasks of the suite, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
     workers: int = 1
-    """Worker processes (tasks run in parallel)."""
+    """Worker processes (jobs run in parallel), or the CPUs of a local Ray cluster."""
+    backend: Literal["serial", "process", "ray"] | None = None
+    """Where the (method, task, seed-chunk) jobs run: `serial` (here), `process` (worker processes on this
+    machine) or `ray` (a Ray cluster; `pip install "swarmloc[ray]"`). Default: serial with `--workers 1`, else
+    process. Every backend gives the same numbers."""
+    address: str | None = None
+    """With `--backend ray`: the cluster to join, `auto` (the one `ray start` runs on this node) or `HOST:PORT`.
+    Default: $RAY_ADDRESS, else a local cluster of `--workers` CPUs."""
     weights: Path | None = None
     """Weights file handed to the method's factory as `weights=`."""
     progress: bool = True
@@ -32,9 +40,11 @@ class Options:
 def run(opts: Options) -> int:
     """Run the evaluation and print a one-line summary per task."""
     from rich.console import Console
+    from rich.markup import escape
 
-    from swarmloc.bench.evaluation.runner import evaluate
-    from swarmloc.bench.evaluation.stats import aggregate_across_tasks
+    from swarmloc.bench.evaluation.backends import check_backend
+    from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate
+    from swarmloc.bench.evaluation.score import suite_score
     from swarmloc.bench.evaluation.suites import get_suite, require_data, restrict_tasks
 
     console = Console(stderr=True)
@@ -45,6 +55,7 @@ def run(opts: Options) -> int:
         if opts.tasks:
             suite = restrict_tasks(suite, opts.tasks)
         require_data(suite)
+        backend = check_backend(opts.backend, opts.workers, opts.address)
     except (KeyError, ValueError, FileNotFoundError) as err:
         console.print(f"[red]error:[/red] {err.args[0] if err.args else err}")
         return 2
@@ -52,18 +63,33 @@ def run(opts: Options) -> int:
         console.print(f"[red]error:[/red] output folder {opts.out.parent} does not exist")
         return 2
     started = time.perf_counter()
-    results = evaluate(opts.method, suite, opts.out, workers=opts.workers,
-                       weights=str(opts.weights) if opts.weights else None, progress=opts.progress)
+    try:
+        results = evaluate(opts.method, suite, opts.out, workers=opts.workers, backend=backend, address=opts.address,
+                           weights=str(opts.weights) if opts.weights else None, progress=opts.progress)
+    except EvaluationFailed as err:
+        console.print(f"[red]error:[/red] {escape(str(err))}")
+        return 1
+    except ImportError as err:  # --backend ray without Ray
+        console.print(f"[red]error:[/red] {err}")
+        return 2
+    except KeyboardInterrupt:
+        console.print(f"[yellow]interrupted[/yellow]: outstanding jobs cancelled, {opts.out} not written")
+        return 130
+    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates))
     for task, per_metric in results.aggregates.items():
-        rmse = per_metric["rmse"]
-        score = per_metric["normalized_score"]
-        if rmse is None:
+        rmse, bound = per_metric["rmse"], per_metric["bound_rmse"]
+        if rmse is None or score is None or task not in score.tasks:
             console.print(f"  {task:34s} [yellow]not run[/yellow]: the method cannot run this task")
             continue
-        console.print(f"  {task:34s} RMSE {rmse.mean:8.3f} m   score {'—' if score is None else f'{score.mean:7.3f}'}")
-    overall = aggregate_across_tasks(results.episodes, "normalized_score")
-    if overall is not None:
-        console.print(f"normalized score {overall.mean:.3f} (IQM {overall.iqm:.3f}, 95% CI "
-                      f"[{overall.ci_low:.3f}, {overall.ci_high:.3f}])")
+        t = score.tasks[task]
+        closed = "" if t.gap_closed is None else f"   gap closed {100 * t.gap_closed:4.0f}%"
+        console.print(f"  {task:34s} RMSE {rmse.mean:8.3f} m   {2.0 ** t.mean:6.2f}× uniform"
+                      f"   bound {'—' if bound is None else f'{bound.mean:.3f} m'}{closed}")
+    if score is not None:
+        low, high = score.times_ci
+        k, n = score.coverage
+        closed = "—" if score.gap_closed is None else f"{100 * score.gap_closed:.0f}%"
+        console.print(f"score v1: {score.times:.2f}× lower error than the standard CEKF (95% CI [{low:.2f}, "
+                      f"{high:.2f}]), gap closed {closed}, IQM g {score.iqm:.2f}, tasks {k}/{n}")
     console.print(f"wrote {opts.out} ({len(results.episodes)} episodes, {time.perf_counter() - started:.1f} s)")
     return 0

@@ -2,7 +2,7 @@
 
 Runs the registry's methods on a suite (default ``quick``), writes one results file per
 method (``<out>/results/<method>.json`` + traces), prints two tables — mean RMSE per
-task and method, and a per-method summary (normalized score with IQM and 95 % CI, delay,
+task and method, and a per-method summary (score v1: 2^S with its 95 % CI, gap closed, coverage, delay,
 energy, jitter, weight variance, anomaly detection, divergence) — with the privileged
 oracle shown apart, writes the same tables as Markdown (``<out>/summary.md``) and the
 plots (``<out>/plots/``).
@@ -22,10 +22,11 @@ from rich.table import Table
 
 from swarmloc.bench.common.files import write_text_atomic
 from swarmloc.bench.common.reports import markdown_table
+from swarmloc.bench.evaluation.backends import Backend
 from swarmloc.bench.evaluation.plots import plot_results, short_name
 from swarmloc.bench.evaluation.results import Results, write_results
-from swarmloc.bench.evaluation.runner import evaluate_methods, traces_path, write_traces
-from swarmloc.bench.evaluation.stats import aggregate_across_tasks
+from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate_methods, traces_path, write_traces
+from swarmloc.bench.evaluation.score import suite_score
 from swarmloc.bench.evaluation.suites import Suite
 
 
@@ -36,8 +37,11 @@ class SummaryRow:
     method: str
     track: str
     privileged: bool
-    tasks: str  # tasks run / tasks in the suite
-    score: tuple[float, float, float, float] | None  # mean, IQM, CI low, CI high
+    tasks: str  # tasks covered / tasks in the suite
+    full: bool  # every task covered
+    score: tuple[float, float, float] | None  # 2^S, CI low, CI high (score v1)
+    gap_closed: float | None
+    iqm_gain: float | None
     delay_ms: float | None
     energy_mj: float | None
     jitter: float | None
@@ -55,12 +59,14 @@ def _mean(results: Results, metric: str) -> float | None:
 
 def summarize_results(results: Results, cpu_s: float | None = None) -> SummaryRow:
     """The summary line of one results file (``cpu_s``: the method's CPU time, if measured)."""
-    score = aggregate_across_tasks(results.episodes, "normalized_score")
+    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates))
     energy = _mean(results, "energy_j")
+    k, n = score.coverage if score is not None else (0, len(results.aggregates))
     return SummaryRow(
         method=results.method.name, track=results.method.track, privileged=results.method.privileged,
-        tasks=f"{sum(agg['rmse'] is not None for agg in results.aggregates.values())}/{len(results.aggregates)}",
-        score=None if score is None else (score.mean, score.iqm, score.ci_low, score.ci_high),
+        tasks=f"{k}/{n}", full=k == n,
+        score=None if score is None else (score.times, *score.times_ci),
+        gap_closed=None if score is None else score.gap_closed, iqm_gain=None if score is None else score.iqm,
         delay_ms=_mean(results, "delay_ms"),
         energy_mj=None if energy is None else 1e3 * energy, jitter=_mean(results, "jitter"),
         weight_var=_mean(results, "weight_var"), detection=_mean(results, "anomaly_detection_rate"),
@@ -102,16 +108,17 @@ def rmse_rows(all_results: dict[str, Results]) -> tuple[list[str], list[list[str
     return header, rows
 
 
-SUMMARY_HEADER = ["method", "track", "tasks", "score", "IQM", "95% CI", "ms/step", "mJ/UAV", "jitter", "α var",
-                  "detect", "diverged", "CPU [s]"]
+SUMMARY_HEADER = ["method", "track", "tasks", "× uniform", "95% CI", "gap closed", "IQM g", "ms/step", "mJ/UAV",
+                  "jitter", "α var", "detect", "diverged", "CPU [s]"]
 
 
 def summary_cells(row: SummaryRow) -> list[str]:
     """Cells of one summary line (see :data:`SUMMARY_HEADER`)."""
     s = row.score
     return [row.method + ("†" if row.privileged else ""), row.track, row.tasks,
-            _fmt(s[0]) if s else "—", _fmt(s[1]) if s else "—",
-            f"[{_fmt(s[2], 2)}, {_fmt(s[3], 2)}]" if s else "—", _fmt(row.delay_ms, 4),
+            f"{s[0]:.2f}×" if s else "—", f"[{s[1]:.2f}, {s[2]:.2f}]" if s else "—",
+            "—" if row.gap_closed is None else f"{100 * row.gap_closed:.0f}%", _fmt(row.iqm_gain, 2),
+            _fmt(row.delay_ms, 4),
             _fmt(row.energy_mj), _fmt(row.jitter), _fmt(row.weight_var), _fmt(row.detection),
             "—" if row.diverged is None else f"{100 * row.diverged:.0f}%",
             "—" if row.cpu_s is None else f"{row.cpu_s:.1f}"]
@@ -119,10 +126,12 @@ def summary_cells(row: SummaryRow) -> list[str]:
 
 def _ranked(all_results: dict[str, Results],
             cpu: dict[str, float] | None = None) -> tuple[list[SummaryRow], list[SummaryRow]]:
-    """Summary rows: public methods by mean normalized score (best first), then privileged ones."""
+    """Summary rows: public methods covering every task by 2^S (best first), then partial coverage, then
+    privileged ones."""
     cpu = cpu or {}
     rows = [summarize_results(r, cpu.get(r.method.name)) for r in _ordered(all_results)]
-    public = sorted([r for r in rows if not r.privileged], key=lambda r: -(r.score[0] if r.score else -np.inf))
+    public = sorted([r for r in rows if not r.privileged],
+                    key=lambda r: (not r.full, -(r.score[0] if r.score else -np.inf)))
     return public, [r for r in rows if r.privileged]
 
 
@@ -148,8 +157,9 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
                 table.add_section()
             table.add_row(escape(cells[0]), *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
         console.print(table)
-    t2 = Table(title=escape("summary over all episodes — normalized score: 0 = uniform CEKF, 1 = privileged oracle "
-                     "(mean, IQM, stratified bootstrap 95% CI; tasks without labelled faults have none); "
+    t2 = Table(title=escape("summary — × uniform: 2^S, how many times lower the error is than the standard CEKF's "
+                     "(geometric mean over covered tasks, stratified bootstrap 95% CI); gap closed: of the way "
+                     "from uniform to the information bound; partial coverage ranked apart; "
                      "CPU [s]: the method's evaluation time here"),
                title_style="bold")
     for j, name in enumerate(SUMMARY_HEADER):
@@ -171,9 +181,11 @@ def markdown_tables(all_results: dict[str, Results], suite: Suite, cpu: dict[str
              "† privileged, not ranked; — not run):", ""]
     lines += markdown_table(header, rows, align="l" + "r" * (len(header) - 1))
     public, privileged = _ranked(all_results, cpu)
-    lines += ["", "Summary over all episodes (normalized score: 0 = uniform CEKF, 1 = privileged oracle; mean, IQM, "
-              "stratified bootstrap 95% CI; ms/step and mJ/UAV on the reference processor; CPU [s]: the method's own "
-              "evaluation time here, all tasks):", ""]
+    lines += ["", "Summary (score v1. × uniform: 2^S, how many times lower the error is than the standard CEKF's, "
+              "geometric mean over the covered tasks, stratified bootstrap 95% CI; gap closed: mean over tasks of "
+              "the gain over the gain achievable down to the information bound; IQM g: interquartile mean of the "
+              "per-episode log2 gains; partial coverage ranked apart; ms/step and mJ/UAV on the reference "
+              "processor; CPU [s]: the method's own evaluation time here, all tasks):", ""]
     lines += markdown_table(SUMMARY_HEADER, [summary_cells(r) for r in public + privileged],
                             align="ll" + "r" * (len(SUMMARY_HEADER) - 2))
     return "\n".join(lines) + "\n"
@@ -195,16 +207,19 @@ def loadable_methods(methods: Sequence[str], console: Console) -> list[str]:
 
 
 def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, plots: bool = True,
-             console: Console | None = None) -> dict[str, Results]:
+             console: Console | None = None, backend: Backend | None = None,
+             address: str | None = None) -> dict[str, Results]:
     """Evaluate ``methods`` on ``suite``, print the tables, write results, Markdown and plots.
 
     Args:
         methods: method names or entry points.
         suite: the suite (the demo uses ``quick``).
         out: output folder (created): ``results/``, ``plots/``, ``summary.md``.
-        workers: worker processes.
+        workers: worker processes (or CPUs of a local Ray cluster).
         plots: also write the PNGs.
         console: where to print (default: a new rich console).
+        backend: ``serial``, ``process`` or ``ray`` (default: serial for one worker, else process).
+        address: Ray cluster to join (``ray`` only).
 
     Returns:
         method → its ``Results``.
@@ -219,7 +234,7 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
     (out / "results").mkdir(exist_ok=True)
     console.print(f"[bold]swarmloc demo[/bold]: {len(methods)} methods × {len(suite.tasks)} tasks × "
                   f"{len(suite.seeds(suite.tasks[0]))} seeds (suite {suite.name}), {workers} worker(s)")
-    runs = evaluate_methods(methods, suite, workers=workers, trace=plots)
+    runs = evaluate_methods(methods, suite, workers=workers, backend=backend, address=address, trace=plots)
     all_results: dict[str, Results] = {}
     cpu: dict[str, float] = {}
     paths = []
@@ -229,6 +244,9 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
             first = next(iter(run.unsupported.values()))
             console.print(f"[yellow]{escape(run.loaded.name)} not run on {len(run.unsupported)} task(s)[/yellow] "
                           f"({escape(tasks)}): {escape(first)}")
+        if run.failed:  # the other methods' tables still come
+            console.print(f"[red]{escape(str(EvaluationFailed(run.loaded.name, run.failed, None)))}[/red]")
+            continue
         results = run.results(suite)
         path = out / "results" / f"{run.loaded.name}.json"
         write_results(path, results)
