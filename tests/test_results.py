@@ -41,7 +41,7 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
     back = R.load_results(path)
     assert back == res
     raw = json.loads(path.read_text())
-    assert list(raw) == ["schema_version", "method", "suite", "provenance", "episodes", "aggregates"]
+    assert list(raw) == ["schema_version", "method", "suite", "provenance", "episodes", "aggregates", "score"]
     assert list(raw["episodes"][0]) == ["task", "seed", "metrics"]
     assert list(raw["episodes"][0]["metrics"]) == list(R.METRIC_NAMES)
     assert raw["episodes"][0]["metrics"]["fault_rmse"] is None
@@ -154,3 +154,21 @@ def test_results_module_stays_light() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_score_block_summarizes_the_episodes_v1() -> None:
+    """The results file's ``score`` block is score v1 of its own episodes (2^S, coverage, per-task gains)."""
+    from swarmloc.bench.evaluation import score as S
+
+    def ep(task: str, seed: int, rmse: float | None, uniform: float) -> dict:
+        return {"task": task, "seed": seed, "metrics": R.EpisodeMetrics.of(rmse=rmse, uniform_rmse=uniform).model_dump()}
+
+    method = R.MethodInfo(name="m", entry_point="m", privileged=False, track="A", deterministic=True)
+    suite = R.SuiteInfo(name="s", version="0", sha256="0" * 64)
+    results = R.make_results(method, suite, [ep("A", 0, 1.0, 2.0), ep("A", 1, 1.0, 4.0), ep("B", 0, None, 1.0)])
+    block = results.score
+    assert block is not None and (block.covered, block.total) == (1, 2)
+    assert block.tasks["A"].gain == 1.5 and block.S == 1.5 and block.times == 2.0 ** 1.5
+    assert block.S == S.suite_score([e.model_dump() for e in results.episodes]).S
+    again = R.parse_results(R.dumps_results(results))
+    assert again.score == block

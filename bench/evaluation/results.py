@@ -10,7 +10,9 @@ One JSON document per (method, suite) evaluation, with exactly this top-level sh
                      "python_version", "numpy_version", "torch_version",
                      "machine": {"platform", "cpu_count"}},
       "episodes":   [{"task", "seed", "metrics": {<every name in METRIC_NAMES>: float | null}}],
-      "aggregates": {"<task id>": {"<metric>": {"mean", "iqm", "ci_low", "ci_high"} | null}}
+      "aggregates": {"<task id>": {"<metric>": {"mean", "iqm", "ci_low", "ci_high"} | null}},
+      "score":      {"S", "ci_low", "ci_high", "times", "iqm", "gap_closed", "covered", "total",
+                     "tasks": {"<task id>": {"gain", "achievable", "gap_closed"}}} | null
     }
 
 A metric a task does not define (``fault_rmse`` on a fault-free task, say) is ``null``.
@@ -192,6 +194,60 @@ class Aggregate(BaseModel):
     ci_high: float
 
 
+class TaskScoreV1(BaseModel):
+    """Score v1 of one covered task (``swarmloc.bench.evaluation.score``).
+
+    Attributes:
+        gain: ``G_t``, the mean over seeds of log2(RMSE_uniform / RMSE).
+        achievable: ``A_t``, the mean of log2(RMSE_uniform / bound) (null where the bound is undefined).
+        gap_closed: ``G_t / A_t`` where ``A_t ≥ log2 1.25``, else null.
+    """
+
+    model_config = _FROZEN
+
+    gain: float
+    achievable: float | None
+    gap_closed: float | None
+
+
+class ScoreV1(BaseModel):
+    """Score v1 of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
+
+    Attributes:
+        S, ci_low, ci_high: the suite score and its stratified-bootstrap 95 % CI.
+        times: ``2^S``.
+        iqm: interquartile mean of the covered episodes' gains.
+        gap_closed: mean over tasks of their gap closed (null if no task has one).
+        covered, total: tasks covered and tasks evaluated.
+        tasks: per covered task.
+    """
+
+    model_config = _FROZEN
+
+    S: float
+    ci_low: float
+    ci_high: float
+    times: float
+    iqm: float
+    gap_closed: float | None
+    covered: int = Field(ge=0)
+    total: int = Field(ge=1)
+    tasks: dict[str, TaskScoreV1]
+
+
+def score_v1(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreV1 | None:
+    """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file)."""
+    from swarmloc.bench.evaluation.score import suite_score  # local: score imports stats, stats this module
+
+    s = suite_score([e.model_dump() for e in episodes], list(tasks))
+    if s is None:
+        return None
+    k, n = s.coverage
+    return ScoreV1(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, times=s.times, iqm=s.iqm, gap_closed=s.gap_closed,
+                   covered=k, total=n, tasks={t: TaskScoreV1(gain=v.mean, achievable=v.achievable,
+                                                             gap_closed=v.gap_closed) for t, v in s.tasks.items()})
+
+
 class Results(BaseModel):
     """A complete results file (see the module docstring for the shape)."""
 
@@ -203,6 +259,7 @@ class Results(BaseModel):
     provenance: Provenance
     episodes: list[Episode] = Field(min_length=1)
     aggregates: dict[str, dict[str, Aggregate | None]]
+    score: ScoreV1 | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -273,17 +330,20 @@ def make_results(
         provenance: Defaults to :func:`collect_provenance`.
 
     Returns:
-        The validated results, aggregates from :func:`swarmloc.bench.evaluation.stats.aggregate`.
+        The validated results, aggregates from :func:`swarmloc.bench.evaluation.stats.aggregate`
+        and the score v1 block from :func:`score_v1`.
     """
     from swarmloc.bench.evaluation.stats import aggregate  # local: stats imports this module
 
     parsed = [e if isinstance(e, Episode) else Episode.model_validate(e) for e in episodes]
+    aggregates = aggregate(parsed)
     return Results(
         method=method,
         suite=suite,
         provenance=provenance or collect_provenance(),
         episodes=parsed,
-        aggregates=aggregate(parsed),
+        aggregates=aggregates,
+        score=score_v1(parsed, list(aggregates)),
     )
 
 
