@@ -34,7 +34,7 @@ from typing import Any
 
 from swarmloc.leaderboard.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import VerificationFailed
-from swarmloc.leaderboard.sandbox import package_folders, require_sandbox, sandbox_command, view_for
+from swarmloc.leaderboard.sandbox import SandboxCommand, package_folders, require_sandbox, sandbox_command, view_for
 
 WORKER_MODULE: str = "swarmloc.leaderboard.verify_worker"
 METHOD_MODULE: str = "swarmloc.leaderboard.method_process"
@@ -167,12 +167,26 @@ class _ResponseReader(threading.Thread):
 
 @dataclass(frozen=True)
 class _Plan:
-    """The two command lines of a re-run and what each may see."""
+    """The two commands of a re-run (sandboxed or plain) and their environments."""
 
-    worker: list[str]
-    method: list[str] | None
+    worker: SandboxCommand
+    method: SandboxCommand | None
     worker_env: dict[str, str]
     method_env: dict[str, str]
+
+    def close(self) -> None:
+        """Close the descriptors the sandboxes were handed."""
+        for command in (self.worker, self.method):
+            if command is not None:
+                command.close()
+
+
+def _start(command: SandboxCommand, env: dict[str, str], cwd: Path, log_path: Path, stdin: int,
+           fds: Sequence[int]) -> subprocess.Popen[bytes]:
+    """Start one process of a re-run in its own session, its output to ``log_path``."""
+    with open(log_path, "wb") as log:
+        return subprocess.Popen(command.argv, env=env, cwd=cwd, stdin=stdin, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True, pass_fds=(*fds, *command.pass_fds))
 
 
 def _limit_args(limits: VerifyLimits) -> list[str]:
@@ -195,16 +209,22 @@ def _plan(python: str, limits: VerifyLimits, fds: dict[str, int], *, sandboxed: 
         homes = tmp / "worker-home", tmp / "method-home"
         for home in homes:
             home.mkdir()
-        return _Plan(worker, method, worker_environment(homes[0], worker_path),
+        return _Plan(SandboxCommand(worker), None if method is None else SandboxCommand(method),
+                     worker_environment(homes[0], worker_path),
                      {**worker_environment(homes[1], method_pythonpath), "NUMBA_NUM_THREADS": "1"})
     bwrap = require_sandbox(python)
     worker_view = view_for([*runner_path], store_file, python)
     method_view = view_for([*method_path, *method_files], store_file, python)
     worker_view.check()
     method_view.check()
+    worker_command = sandbox_command(worker, worker_view, bwrap=bwrap, python=python)
+    try:
+        method_command = None if method is None else sandbox_command(method, method_view, bwrap=bwrap, python=python)
+    except BaseException:
+        worker_command.close()
+        raise
     return _Plan(
-        sandbox_command(worker, worker_view, bwrap=bwrap),
-        None if method is None else sandbox_command(method, method_view, bwrap=bwrap),
+        worker_command, method_command,
         worker_environment(SANDBOX_HOME, worker_path, sandboxed=True),
         {**worker_environment(SANDBOX_HOME, method_pythonpath, sandboxed=True), "NUMBA_NUM_THREADS": "1"},
     )
@@ -304,6 +324,7 @@ def run_in_worker(
         fds |= {"method_read": to_method_read, "method_write": to_worker_write}
         request["method_channel"] = {"read_fd": to_worker_read, "write_fd": to_method_write}
     worker_proc = method_proc = None
+    plan: _Plan | None = None
     with tempfile.TemporaryDirectory(prefix="swarmloc-verify-") as tmp_name:
         tmp = Path(tmp_name)
         logs = {"worker": tmp / "worker.log"} | ({"method": tmp / "method.log"} if isolated else {})
@@ -315,21 +336,10 @@ def run_in_worker(
                          cache_sources=cache_sources)
             started = time.monotonic()
             if plan.method is not None:
-                with open(logs["method"], "wb") as log:
-                    method_proc = subprocess.Popen(
-                        plan.method, env=plan.method_env, cwd=tmp, stdin=subprocess.DEVNULL,
-                        stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                        pass_fds=(fds["method_read"], fds["method_write"]),
-                    )
-            with open(logs["worker"], "wb") as log:
-                worker_pass = [response_write]
-                if isolated:
-                    worker_pass += [to_worker_read, to_method_write]
-                worker_proc = subprocess.Popen(
-                    plan.worker, env=plan.worker_env, cwd=tmp, stdin=subprocess.PIPE,
-                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                    pass_fds=worker_pass,
-                )
+                method_proc = _start(plan.method, plan.method_env, tmp, logs["method"], subprocess.DEVNULL,
+                                     (fds["method_read"], fds["method_write"]))
+            worker_pass = (response_write, *((to_worker_read, to_method_write) if isolated else ()))
+            worker_proc = _start(plan.worker, plan.worker_env, tmp, logs["worker"], subprocess.PIPE, worker_pass)
         except BaseException:
             _kill(method_proc)
             os.close(response_read)
@@ -337,6 +347,8 @@ def run_in_worker(
         finally:
             for fd in pipes:  # the children hold their ends now
                 os.close(fd)
+            if plan is not None:
+                plan.close()
         reader = _ResponseReader(response_read)
         reader.start()
         try:

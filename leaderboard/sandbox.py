@@ -13,13 +13,15 @@ Submitted code runs only inside :func:`sandbox_command`'s wrapper, which gives i
 * **its own PID namespace** (it sees and can signal only its own processes; when the
   run ends, the namespace's init exits and the kernel kills whatever is left), a new
   session (no terminal to inject into), no capabilities, no further user namespaces,
-  and death with its parent.
+  and death with its parent. Started by root, the sandbox runs as a real ``nobody``
+  (:mod:`swarmloc.leaderboard.sandbox_userns`), since root is exempt from the
+  process-count limit.
 
 Memory, process-count and file-size limits are ``setrlimit`` calls made by the worker
 on itself before it imports submitted code (:mod:`swarmloc.leaderboard.verify_worker`);
 the wall-time limit is the parent's (:mod:`swarmloc.leaderboard.verify`).
 
-bubblewrap needs unprivileged user namespaces (or root). Where it is missing or cannot
+bubblewrap needs unprivileged user namespaces. Where it is missing or cannot
 create them, :func:`require_sandbox` raises :class:`SandboxUnavailable` naming the tool,
 the reason, and the opt-in (``--no-sandbox``) that runs a user's own method with the time
 and memory limits only.
@@ -38,6 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmloc.leaderboard.errors import SandboxUnavailable
+from swarmloc.leaderboard.sandbox_userns import DROP_TO_NOBODY, UserNamespaceError, user_namespace_for_root
 
 BWRAP: str = "bwrap"
 """The bubblewrap executable (Debian/Ubuntu package ``bubblewrap``)."""
@@ -189,14 +192,69 @@ def _root_arguments() -> list[str]:
             args += ["--symlink", os.readlink(name), name]
         elif os.path.isdir(name):
             args += ["--ro-bind", name, name]
+    args += ["--perms", "0755", "--dir", "/etc"]
     for name in _SYSTEM_ETC:
         if _exists(Path(name)):
             args += ["--ro-bind", name, name]
     return args
 
 
-def sandbox_command(command: Sequence[str], view: SandboxView,
-                    limits: SandboxLimits = SandboxLimits(), bwrap: str = BWRAP) -> list[str]:
+@dataclass
+class SandboxCommand:
+    """A command line wrapped in bubblewrap, and the descriptors it needs.
+
+    Attributes:
+        argv: The full command line.
+        pass_fds: Descriptors to pass to the child and close once it started
+            (:meth:`close`): the user namespace a root parent prepared.
+    """
+
+    argv: list[str]
+    pass_fds: tuple[int, ...] = ()
+
+    def close(self) -> None:
+        """Close the descriptors (once the child holds them)."""
+        for fd in self.pass_fds:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.pass_fds = ()
+
+
+def _unreadable_by_nobody(path: Path) -> bool:
+    mode = path.stat().st_mode
+    needed = 0o005 if path.is_dir() else 0o004
+    return mode & needed != needed
+
+
+def _user_arguments(command: Sequence[str], view: SandboxView, python: str) -> tuple[list[str], list[str], int | None]:
+    """Namespace options, the command as run, and the namespace descriptor (root only).
+
+    As root, the sandbox joins a user namespace in which it becomes a real ``nobody``
+    (see :mod:`swarmloc.leaderboard.sandbox_userns`); otherwise bubblewrap makes one that
+    maps our own user to ``nobody``.
+    """
+    if os.geteuid() != 0:
+        return (["--unshare-user", "--disable-userns", "--uid", str(SANDBOX_UID), "--gid", str(SANDBOX_UID),
+                 "--cap-drop", "ALL"], list(command), None)
+    for path in view.readable:
+        if path.exists() and _unreadable_by_nobody(path):
+            raise SandboxUnavailable(
+                f"{path} is not readable by other users (mode {path.stat().st_mode & 0o777:o}); started by root, "
+                f"the verification sandbox runs as 'nobody', so the method's files must be world-readable "
+                f"(chmod o+rX {path})"
+            )
+    try:
+        fd = user_namespace_for_root(python)
+    except UserNamespaceError as err:
+        raise SandboxUnavailable(f"cannot prepare the sandbox's user namespace as root: {err}") from None
+    return (["--userns", str(fd), "--cap-drop", "ALL", "--cap-add", "CAP_SETUID", "--cap-add", "CAP_SETGID"],
+            [python, "-I", "-S", "-c", DROP_TO_NOBODY, *command], fd)
+
+
+def sandbox_command(command: Sequence[str], view: SandboxView, limits: SandboxLimits = SandboxLimits(),
+                    bwrap: str = BWRAP, python: str = sys.executable) -> SandboxCommand:
     """``command`` wrapped in bubblewrap with the isolation described in the module docstring.
 
     Args:
@@ -204,47 +262,65 @@ def sandbox_command(command: Sequence[str], view: SandboxView,
         view: What it may read.
         limits: Sizes of the private ``/tmp`` and ``/dev/shm``.
         bwrap: The bubblewrap executable.
+        python: Interpreter of the helpers a root parent runs.
 
     Returns:
-        The full command line.
+        The command (close it once started: it may hold a descriptor).
+
+    Raises:
+        SandboxUnavailable: started by root, a bound path is not readable by ``nobody``,
+            or the user namespace cannot be made.
     """
     system = set(_SYSTEM_DIRS)
     binds: list[str] = []
+    made: set[Path] = {Path("/"), Path("/tmp")}
     for path in view.readable:
         if str(path) in system or any(str(parent) in system and not os.path.islink(str(parent))
                                       for parent in path.parents):
             continue  # already visible through a system folder
+        # The folders above a bound path are made empty and traversable (not copies of,
+        # say, /root's mode 0700, which 'nobody' could not pass).
+        for parent in reversed(path.parents):
+            if parent not in made:
+                made.add(parent)
+                binds += ["--perms", "0755", "--dir", str(parent)]
         binds += ["--ro-bind", str(path), str(path)]
-    return [
+    user, run, fd = _user_arguments(command, view, python)
+    argv = [
         bwrap,
-        "--unshare-all", "--unshare-user", "--disable-userns",
-        "--uid", str(SANDBOX_UID), "--gid", str(SANDBOX_UID),
-        "--cap-drop", "ALL",
+        *user,
+        "--unshare-pid", "--unshare-net", "--unshare-ipc", "--unshare-uts", "--unshare-cgroup-try",
         "--die-with-parent", "--new-session",
         "--hostname", "swarmloc-sandbox",
         *_root_arguments(),
         "--proc", "/proc",
         "--dev", "/dev",
-        "--size", str(limits.shm_bytes), "--tmpfs", "/dev/shm",
-        "--size", str(limits.tmp_bytes), "--tmpfs", "/tmp",
+        "--perms", "1777", "--size", str(limits.shm_bytes), "--tmpfs", "/dev/shm",
+        "--perms", "1777", "--size", str(limits.tmp_bytes), "--tmpfs", "/tmp",
         *binds,  # after the tmpfs, so that files under the host's /tmp show through it
         "--remount-ro", "/",
         "--chdir", "/tmp",
         "--",
-        *command,
+        *run,
     ]
+    return SandboxCommand(argv, () if fd is None else (fd,))
 
 
 @functools.cache
 def _probe(bwrap_path: str, python: str) -> str | None:
     """None when a Python interpreter starts inside the sandbox, else bwrap's complaint."""
-    command = sandbox_command([python, "-I", "-c", "pass"], view_for([], python=python),
-                              bwrap=bwrap_path)
     try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=60,
-                              stdin=subprocess.DEVNULL, check=False)
+        command = sandbox_command([python, "-I", "-c", "pass"], view_for([], python=python), bwrap=bwrap_path,
+                                  python=python)
+    except SandboxUnavailable as err:
+        return str(err)
+    try:
+        done = subprocess.run(command.argv, capture_output=True, text=True, timeout=60,
+                              stdin=subprocess.DEVNULL, check=False, pass_fds=command.pass_fds)
     except (OSError, subprocess.TimeoutExpired) as err:
         return str(err)
+    finally:
+        command.close()
     if done.returncode == 0:
         return None
     return (done.stderr.strip() or done.stdout.strip() or f"exit status {done.returncode}")[-500:]
@@ -286,6 +362,7 @@ __all__ = [
     "BWRAP",
     "SANDBOX_UID",
     "SWARMLOC_PACKAGES",
+    "SandboxCommand",
     "SandboxLimits",
     "SandboxView",
     "package_folders",

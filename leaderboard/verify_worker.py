@@ -175,7 +175,10 @@ def is_out_of_memory(err: BaseException) -> bool:
 
 
 def _failure(kind: str, err: BaseException) -> dict[str, Any]:
-    text = "".join(traceback.format_exception(err))
+    # A method that failed in its own process brings its own traceback in the message;
+    # the worker's (runner internals, then the pipe) would only repeat it.
+    remote = type(err).__module__ == "swarmloc.leaderboard.method_process"
+    text = "" if remote else "".join(traceback.format_exception(err))
     return {
         "ok": False,
         "kind": kind,
