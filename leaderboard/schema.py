@@ -61,6 +61,8 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
     "cep90": (0.0, math.inf),
     "fault_rmse": (0.0, math.inf),
     "healthy_rmse": (0.0, math.inf),
+    "uniform_rmse": (0.0, math.inf),  # the standard CEKF on the same episode (score v1's reference)
+    "bound_rmse": (0.0, math.inf),  # the episode's information bound
     # A flag per episode, a fraction once averaged.
     "diverged": (0.0, 1.0),
     # Time and energy cannot be negative.

@@ -158,9 +158,10 @@ class Hostile:
         path.write_text(source, encoding="utf-8")
         return f"{path}:make"
 
-    def submit(self, entry_point: str, *extra: str, honest: bool = False, timeout: float = 300) -> Submission:
-        """Write the results file and run ``swarmloc submit RESULTS`` on it; what happened."""
-        results = write_results(self.folder / "results.json", entry_point, honest=honest)
+    def submit(self, entry_point: str, *extra: str, honest: bool = False, track: str = "A",
+               cwd: Path | None = None, timeout: float = 300) -> Submission:
+        """Write the results file and run ``swarmloc submit RESULTS`` (in ``cwd``, default the folder)."""
+        results = write_results(self.folder / "results.json", entry_point, honest=honest, track=track)
         script = Path(sys.executable).parent / "swarmloc"
         command = [str(script)] if script.exists() else [
             sys.executable, "-c", "import sys; from swarmloc.bench.cli import main; sys.exit(main())"]
@@ -170,7 +171,7 @@ class Hostile:
         env["COLUMNS"] = "400"  # one line per message: the assertions read whole sentences
         started = time.monotonic()
         done = subprocess.run(args, capture_output=True, text=True, timeout=timeout, env=env,
-                              cwd=self.folder, check=False)
+                              cwd=cwd or self.folder, check=False)
         return Submission(done.returncode, done.stdout + done.stderr, time.monotonic() - started)
 
     def assert_refused(self, submission: Submission, *reasons: str) -> None:

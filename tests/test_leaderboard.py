@@ -315,6 +315,14 @@ def test_nondeterministic_methods_get_a_tolerance(db_url: str, tmp_path: Path) -
 # -- verification sandbox ------------------------------------------------------------
 
 
+def test_every_metric_has_physical_bounds() -> None:
+    from swarmloc.bench.evaluation.results import METRIC_NAMES
+    from swarmloc.leaderboard.schema import METRIC_BOUNDS
+
+    assert set(METRIC_BOUNDS) == set(METRIC_NAMES)
+    assert all(low < high for low, high in METRIC_BOUNDS.values())
+
+
 def test_sampler_is_seeded_and_sized() -> None:
     pool = [(f"t{i % 4}", i) for i in range(95)]
     a = sample_episodes(pool, 0.1, 3, seed=11)

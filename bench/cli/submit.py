@@ -36,7 +36,9 @@ class Options:
     weights: Path | None = None
     """Weights file given to `swarmloc evaluate --weights`; its SHA-256 must match the results file."""
     search_path: tuple[Path, ...] = ()
-    """Directories the method's modules are imported from (the sandbox shows them to the method, read-only)."""
+    """Directories the method's modules are imported from, shown read-only to the method's sandbox (default for a
+    `module:factory` method not installed as a package: the working directory, as `swarmloc evaluate` imports
+    it)."""
     db_url: str | None = None
     """Store URL, e.g. `sqlite:///lb.db` or `postgresql+psycopg://user@host/db` (default: $SWARMLOC_DB, else a
     SQLite file in the user data directory)."""
@@ -59,6 +61,17 @@ class Options:
     """Processes and threads each verification sandbox may hold."""
     max_file_mb: int = 64
     """Largest file (captured output included) a verification process may write, in MiB."""
+
+
+def _module_search_path(opts: Options) -> tuple[Path, ...]:
+    """The working directory for a `module:factory` method found nowhere else (as `swarmloc evaluate` imports it)."""
+    from swarmloc.leaderboard.entry_points import locate_source, parse_entry_point
+    from swarmloc.leaderboard.schema import read_results
+
+    entry = parse_entry_point(opts.entry_point or read_results(opts.results).method.entry_point)
+    if entry.kind != "module" or locate_source(entry) is not None:
+        return ()
+    return (Path.cwd(),)
 
 
 def run(opts: Options, console: Console | None = None) -> int:
@@ -91,7 +104,7 @@ def run(opts: Options, console: Console | None = None) -> int:
             sample_seed=opts.seed,
             limits=VerifyLimits(wall_time_s=opts.time_limit_s, memory_bytes=opts.memory_limit_mb * 1024**2,
                                 max_processes=opts.max_processes, max_file_bytes=opts.max_file_mb * 1024**2),
-            search_path=opts.search_path,
+            search_path=opts.search_path or _module_search_path(opts),
             sandbox=opts.sandbox,
         )
     except (SubmissionError, StoreError, ValueError) as err:
