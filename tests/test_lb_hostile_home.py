@@ -26,7 +26,8 @@ def test_home_and_data_folder_are_not_there(tmp_path: Path) -> None:
             report = [f"HOME={{os.environ.get('HOME')}}"]
             for path in ({str(secret)!r}, {str(Path.home())!r}, {user_data_dir("swarmloc")!r}, "/etc/shadow"):
                 try:
-                    report.append(f"{{path}}: " + (open(path).read() if os.path.isfile(path) else str(os.listdir(path))))
+                    seen = open(path).read() if os.path.isfile(path) else str(os.listdir(path))
+                    report.append(f"{{path}}: {{seen}}")
                 except OSError as err:
                     report.append(f"{{path}}: {{err.strerror}}")
             raise RuntimeError("; ".join(report))

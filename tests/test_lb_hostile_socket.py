@@ -52,5 +52,6 @@ def test_no_connection_leaves_the_sandbox(tmp_path: Path) -> None:
     finally:
         listener.close()
         unix_listener.close()
-    hostile.assert_refused(done, f"('127.0.0.1', {port}): Connection refused", "('1.1.1.1', 53): Network is unreachable",
+    hostile.assert_refused(done, f"('127.0.0.1', {port}): Connection refused",
+                           "('1.1.1.1', 53): Network is unreachable",
                            "unix: No such file or directory")
