@@ -15,21 +15,27 @@ from collections.abc import Iterable, Sequence
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES
 from swarmloc.leaderboard.ranking import (
-    SuiteKey,
-    by_suite,
+    Column,
+    Standing,
+    SuiteBoard,
+    column_score,
+    family_columns,
     fmt,
-    fmt_ci,
-    short_task,
-    split_ranked,
+    fmt_pct,
+    fmt_score,
+    fmt_times,
     status,
-    suite_tasks,
-    task_rmse,
+    suite_boards,
 )
-from swarmloc.leaderboard.store import LeaderboardEntry, LeaderboardStore
+from swarmloc.leaderboard.store import LeaderboardStore
+
+if TYPE_CHECKING:
+    from swarmloc.leaderboard.site_plots import SitePlot
 
 _STATIC_FILES = ("leaderboard.css", "leaderboard.js")
 _PLOT_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg", ".webp")
@@ -57,25 +63,41 @@ def _page(title: str, body: str, root: str) -> str:
     )
 
 
-def _num_cell(value: float | None, digits: int = 3) -> str:
+def _num_cell(value: float | None, text: str, title: str | None = None) -> str:
     data = "" if value is None else repr(float(value))
-    return f"<td class=\"num\" data-value=\"{data}\">{_e(fmt(value, digits))}</td>"
+    tip = "" if title is None else f" title=\"{_e(title)}\""
+    return f"<td class=\"num\" data-value=\"{data}\"{tip}>{_e(text)}</td>"
 
 
-def _html_table(entries: Sequence[LeaderboardEntry], tasks: Sequence[str], ranked: bool,
+def _column_cell(standing: Standing, column: Column) -> str:
+    """A family (or task) cell: 2^G over its covered tasks; the worst task on hover."""
+    cs = column_score(standing.score, column)
+    if cs is None:
+        return _num_cell(None, "—", f"{column.title}: not covered")
+    tip = f"worst task: {cs.worst_task} ({fmt_times(cs.worst_times)}× uniform)"
+    if cs.covered < cs.total:
+        tip += f"; {cs.covered} of {cs.total} tasks covered"
+    return _num_cell(cs.times, fmt_times(cs.times) + ("" if cs.covered == cs.total else "*"), tip)
+
+
+def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Sequence[Column], ranked: bool,
                 table_id: str) -> str:
+    n = len(board.tasks)
     heads: list[tuple[str, str, str]] = []  # (label, sort type, title)
     if ranked:
-        heads.append(("#", "number", "rank by mean normalized score"))
+        heads.append(("#", "number", "rank by score v1 (S)"))
     heads += [
         ("Method", "text", "method name"),
         ("Track", "text", "A: link trust, B: full estimator"),
-        ("Score", "number", "mean normalized score over all task × seed runs"),
-        ("IQM", "number", "interquartile mean of the normalized score"),
-        ("95% CI", "number", "task-stratified bootstrap 95% CI of the mean score"),
+        ("2^S", "number", "× lower error than the standard CEKF (uniform): geometric mean over tasks"),
+        ("95% CI", "number", "stratified-bootstrap 95% CI of 2^S (seeds resampled within tasks)"),
+        ("Gap closed", "number", "share of the achievable gain (uniform to the information bound) closed, "
+                                 "mean over tasks where it is defined"),
+        ("Tasks", "number", "tasks covered / tasks in the suite"),
     ]
-    heads += [(f"RMSE {short_task(t)}", "number", f"mean RMSE [m] on {t}") for t in tasks]
+    heads += [(c.header, "number", f"× uniform over {c.title}; hover a cell for its worst task") for c in columns]
     heads += [
+        ("v0 score", "number", "mean normalized score v0 (0 = uniform, 1 = oracle v0)"),
         ("Delay [ms]", "number", "mean computation delay per step"),
         ("Energy [J]", "number", "mean energy per episode"),
         ("Jitter", "number", "mean |Δ trust| per step"),
@@ -87,21 +109,26 @@ def _html_table(entries: Sequence[LeaderboardEntry], tasks: Sequence[str], ranke
         for label, kind, tip in heads
     )
     rows = []
-    for rank, entry in enumerate(entries, start=1):
-        score = entry.score
-        cells = [f"<td class=\"num\" data-value=\"{rank}\">{rank}</td>"] if ranked else []
+    for standing in standings:
+        entry, score = standing.entry, standing.score
+        k, _ = standing.coverage(n)
+        cells = [f"<td class=\"num\" data-value=\"{standing.rank}\">{standing.rank}</td>"] if ranked else []
+        low_high = score.times_ci if score else None
         cells += [
             f"<td data-value=\"{_e(entry.name.casefold())}\">"
             f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a></td>",
             f"<td data-value=\"{_e(entry.track)}\">{_e(entry.track)}</td>",
-            _num_cell(score.mean if score else None),
-            _num_cell(score.iqm if score else None),
-            f"<td class=\"num\" data-value=\"{'' if score is None else repr(score.ci_low)}\">"
-            f"{_e(fmt_ci(entry))}</td>",
-            *(_num_cell(task_rmse(entry, t)) for t in tasks),
-            _num_cell(entry.delay_ms, 2),
-            _num_cell(entry.energy_j, 3),
-            _num_cell(entry.jitter, 4),
+            _num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
+                      None if score is None else f"S = {score.S:.3f}, IQM of the gains {score.iqm:.3f}"),
+            _num_cell(low_high[0] if low_high else None,
+                      "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
+            _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
+            _num_cell(k, f"{k}/{n}"),
+            *(_column_cell(standing, c) for c in columns),
+            _num_cell(entry.score.mean if entry.score else None, fmt(entry.score.mean if entry.score else None)),
+            _num_cell(entry.delay_ms, fmt(entry.delay_ms, 2)),
+            _num_cell(entry.energy_j, fmt(entry.energy_j, 3)),
+            _num_cell(entry.jitter, fmt(entry.jitter, 4)),
             f"<td data-value=\"{_e(status(entry))}\">{_e(status(entry))}</td>",
         ]
         rows.append(f"<tr data-method-id=\"{entry.id}\">{''.join(cells)}</tr>")
@@ -116,34 +143,61 @@ def _slug(*parts: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "suite"
 
 
-def _index_html(groups: dict[SuiteKey, list[LeaderboardEntry]]) -> str:
+def _figures(plots: Sequence[SitePlot], root: Path) -> str:
+    if not plots:
+        return ""
+    figures = "\n".join(
+        f"<figure><img src=\"{_e(quote(p.path.relative_to(root).as_posix()))}\" alt=\"{_e(p.alt)}\">"
+        f"<figcaption>{_e(p.caption)}</figcaption></figure>"
+        for p in plots
+    )
+    return f"<h3>Plots</h3>\n<div class=\"plots suite-plots\">{figures}</div>"
+
+
+def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], root: Path) -> str:
     generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     parts = [
         "<header><h1>swarmloc leaderboard</h1>",
-        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by their mean "
-        "normalized score (0 = uniform-trust CEKF, 1 = privileged oracle trust). Click a "
-        "column header to sort.</p></header>",
+        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by score v1: 2^S, how many "
+        "times lower the position error is than the standard CEKF's (uniform trust), the geometric mean "
+        "over the suite's tasks, with a stratified-bootstrap 95% CI. Family columns give × uniform over "
+        "the family's tasks (hover for the worst task). Click a column header to sort.</p></header>",
         "<main>",
     ]
-    if not groups:
+    if not boards:
         parts.append("<p class=\"empty\">No submissions yet.</p>")
-    for (name, version), entries in groups.items():
-        slug = _slug(name, version)
-        tasks = suite_tasks(entries)
-        ranked, privileged = split_ranked(entries)
+    for board in boards:
+        slug = _slug(board.name, board.version)
+        columns = family_columns(board.tasks)
         parts.append(f"<section class=\"suite\" id=\"suite-{slug}\">")
-        parts.append(f"<h2>Suite {_e(name)} <span class=\"version\">v{_e(version)}</span></h2>")
-        if ranked:
-            parts.append(_html_table(ranked, tasks, ranked=True, table_id=f"ranked-{slug}"))
+        parts.append(f"<h2>Suite {_e(board.name)} <span class=\"version\">v{_e(board.version)}</span></h2>")
+        if board.ranked:
+            parts.append(_html_table(board, board.ranked, columns, ranked=True, table_id=f"ranked-{slug}"))
         else:
             parts.append("<p class=\"empty\">No ranked methods yet.</p>")
-        if privileged:
+        if board.partial:
+            parts.append(
+                "<h3>Partial coverage</h3><p class=\"meta\">These methods cannot run some tasks of the "
+                "suite. They are ranked apart, by 2^S over the tasks they cover (so compared with uniform "
+                "only on those tasks); * marks a family they cover in part.</p>"
+            )
+            parts.append(_html_table(board, board.partial, columns, ranked=True, table_id=f"partial-{slug}"))
+        if board.privileged:
             parts.append(
                 "<h3>Privileged methods</h3><p class=\"meta\">These read ground truth or fault "
-                "labels (e.g. the oracle that defines score 1) and are not ranked.</p>"
+                "labels (e.g. the oracle) and are not ranked.</p>"
             )
-            parts.append(_html_table(privileged, tasks, ranked=False,
+            parts.append(_html_table(board, board.privileged, columns, ranked=False,
                                      table_id=f"privileged-{slug}"))
+        if board.filled:
+            ref = board.reference
+            parts.append(
+                f"<p class=\"meta\">The uniform RMSE of {board.filled} episode(s) (results files older "
+                "than results schema 2) is taken from the stored uniform entry"
+                + ("" if ref is None else f" (<a href=\"methods/{ref.id}.html\">#{ref.id}</a>)")
+                + " on the same task and seed.</p>"
+            )
+        parts.append(_figures(plots.get(slug, []), root))
         parts.append("</section>")
     parts.append("</main>")
     return _page("swarmloc leaderboard", "\n".join(parts), root="")
@@ -169,7 +223,8 @@ def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | 
     return images, None
 
 
-def _method_html(entry: LeaderboardEntry, images: Sequence[Path], plot_error: str | None) -> str:
+def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None) -> str:
+    entry, v1 = standing.entry, standing.score
     results = json.loads(entry.results_json)
     prov = results.get("provenance", {})
     machine = prov.get("machine", {})
@@ -191,7 +246,10 @@ def _method_html(entry: LeaderboardEntry, images: Sequence[Path], plot_error: st
         ("Weights SHA-256", f"<code>{_e(entry.weights_sha256 or '—')}</code>"),
         ("Suite", _e(f"{entry.suite_name} v{entry.suite_version} ({entry.suite_sha256[:12]}…)")),
         ("Submitted", _e(entry.created_utc.strftime("%Y-%m-%d %H:%M UTC"))),
-        ("Normalized score",
+        ("Score v1", _e("—" if v1 is None else
+                        f"{fmt_score(v1)}× lower error than uniform (S = {v1.S:.3f}; IQM of the gains "
+                        f"{v1.iqm:.3f}; gap closed {fmt_pct(v1.gap_closed)}; {len(v1.tasks)}/{n_tasks} tasks)")),
+        ("Normalized score (v0)",
          _e("—" if score is None else
             f"{score.mean:.3f} (IQM {score.iqm:.3f}, 95% CI [{score.ci_low:.3f}, {score.ci_high:.3f}])")),
     ])
@@ -209,11 +267,16 @@ def _method_html(entry: LeaderboardEntry, images: Sequence[Path], plot_error: st
     metrics = [m for m in METRIC_NAMES if m in present]
     head = "".join(
         f"<th scope=\"col\" data-type=\"number\"><button type=\"button\">{_e(m)}</button></th>"
-        for m in metrics
+        for m in ("× uniform", "gap closed", *metrics)
     )
     body_rows = []
     for task in sorted(entry.task_aggregates):
-        cells = []
+        t = v1.tasks.get(task) if v1 else None
+        cells = [
+            _num_cell(None if t is None else 2.0**t.mean, "—" if t is None else fmt_times(2.0**t.mean),
+                      None if t is None else f"G_t = {t.mean:.3f} (mean log2 gain over {t.gains.size} seeds)"),
+            _num_cell(None if t is None else t.gap_closed, fmt_pct(None if t is None else t.gap_closed)),
+        ]
         for m in metrics:
             agg = entry.task_aggregates[task].get(m)
             if agg is None:
@@ -246,8 +309,9 @@ def _method_html(entry: LeaderboardEntry, images: Sequence[Path], plot_error: st
         f"<section><h2>Method</h2><table class=\"facts\">{about}</table></section>",
         f"<section><h2>Provenance</h2><table class=\"facts\">{provenance}</table>",
         f"<p><a href=\"../results/{entry.id}.json\" download>Download the results file</a></p></section>",
-        "<section><h2>Per-task results</h2><p class=\"meta\">Mean over seeds; hover for IQM "
-        f"and 95% CI.</p>\n{per_task}</section>",
+        "<section><h2>Per-task results</h2><p class=\"meta\">× uniform: 2^G_t, G_t the mean over seeds of "
+        "log2(RMSE_uniform / RMSE); metrics: mean over seeds, hover for IQM and 95% CI.</p>\n"
+        f"{per_task}</section>",
         plots,
         "</main>",
     ])
@@ -258,10 +322,12 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
                 plots: bool = True) -> Path:
     """Write the static leaderboard site.
 
-    Layout: ``index.html`` (one section per suite: ranked table, privileged table),
+    Layout: ``index.html`` (one section per suite: ranked, partial-coverage and privileged
+    tables, then the suite's plots from :mod:`swarmloc.leaderboard.site_plots`),
     ``methods/<id>.html`` (metadata, provenance, per-task table, plots),
     ``results/<id>.json`` (the submitted results files, for download),
-    ``plots/<id>/`` (images from ``swarmloc.bench.evaluation.plots.plot_results`` when available)
+    ``plots/<id>/`` (images from ``swarmloc.bench.evaluation.plots.plot_results`` when available),
+    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn)
     and ``static/`` (CSS and the vanilla-JS table sorter). No external resources.
 
     Args:
@@ -280,20 +346,44 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     package_static = resources.files("swarmloc.leaderboard") / "static"
     for name in _STATIC_FILES:
         (out / "static" / name).write_bytes((package_static / name).read_bytes())
-    entries = store.entries(suite)
-    for entry in entries:
-        results_file = out / "results" / f"{entry.id}.json"
-        results_file.write_text(entry.results_json, encoding="utf-8")
-        plots_dir = out / "plots" / str(entry.id)
-        if plots_dir.exists():
-            shutil.rmtree(plots_dir)
-        images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
-        (out / "methods" / f"{entry.id}.html").write_text(
-            _method_html(entry, images, error), encoding="utf-8"
-        )
+    boards = suite_boards(store.entries(suite))
+    for board in boards:
+        for standing in board.standings:
+            _write_method(out, standing, len(board.tasks), plots)
+    suite_figures = {}
+    for board in boards:
+        slug = _slug(board.name, board.version)
+        suite_figures[slug] = _draw_suite_plots(board, out / "plots" / f"suite-{slug}")
     index = out / "index.html"
-    index.write_text(_index_html(by_suite(entries)), encoding="utf-8")
+    index.write_text(_index_html(boards, suite_figures, out), encoding="utf-8")
     return index
+
+
+def _draw_suite_plots(board: SuiteBoard, plots_dir: Path) -> list[SitePlot]:
+    """The suite's plots (none, with a warning, if drawing fails: the tables still render)."""
+    from swarmloc.leaderboard.site_plots import suite_plots
+
+    if plots_dir.exists():
+        shutil.rmtree(plots_dir)
+    try:
+        return suite_plots(board, plots_dir)
+    except Exception as err:  # a broken plot must not take the site down
+        warnings.warn(f"suite plots of {board.name} v{board.version} failed: {err}", stacklevel=2)
+        return []
+
+
+def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool) -> None:
+    """A method's page, results file and (when ``plots``) its plots."""
+    entry = standing.entry
+    results_file = out / "results" / f"{entry.id}.json"
+    results_file.write_text(entry.results_json, encoding="utf-8")
+    plots_dir = out / "plots" / str(entry.id)
+    if plots_dir.exists():
+        shutil.rmtree(plots_dir)
+    images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
+    (out / "methods" / f"{entry.id}.html").write_text(
+        _method_html(standing, n_tasks, images, error), encoding="utf-8"
+    )
 
 
 __all__ = ["render_html"]

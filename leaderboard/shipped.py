@@ -71,8 +71,8 @@ def load_shipped(store: LeaderboardStore, results_dir: Path = RESULTS_DIR) -> Sh
 
 def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path:
     """The main job's last step: load the shipped results into the store, print the
-    leaderboard, write its HTML site (without per-method plots; ``swarmloc leaderboard
-    html`` draws them) to ``out / "leaderboard"``.
+    leaderboard, write its HTML site (with the suite plots, without per-method plots;
+    ``swarmloc leaderboard html`` draws them) to ``out / "leaderboard"``.
 
     Args:
         out: the demo's output folder.
@@ -84,12 +84,12 @@ def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path
     """
     from rich.console import Console
 
-    from swarmloc.leaderboard.views import print_leaderboard, render_html
+    from swarmloc.leaderboard.views import TERMINAL_WIDTH, print_leaderboard, render_html
 
     if console is None:
         console = Console()
-        if not console.is_terminal:  # a pipe or a file: do not squeeze the per-task columns
-            console.width = max(console.width, 200)
+        if not console.is_terminal:  # a pipe or a file: the width the table is laid out for
+            console.width = max(console.width, TERMINAL_WIDTH)
     with LeaderboardStore(db_url) as store:
         loaded = load_shipped(store)
         if loaded.stored:

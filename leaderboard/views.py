@@ -1,9 +1,11 @@
 """Views of the store: a terminal table, the static HTML site, CSV/JSON exports.
 
-Methods are ranked per suite by their mean normalized score (higher is better), shown
-with its IQM and 95 % CI, the per-task RMSE, and the mean delay, energy and jitter.
-Privileged methods (those that read ground truth) appear in a separate section and are
-not ranked with the rest (see :mod:`swarmloc.leaderboard.ranking`).
+Methods are ranked per suite by score v1 (``2^S``: how many times lower the error is than
+the standard CEKF's, with its 95 % CI), beside the gap closed towards the information bound
+and the task coverage ``k/T``; partial coverage is ranked in its own table and privileged
+methods (those that read ground truth) are shown apart, not ranked (see
+:mod:`swarmloc.leaderboard.ranking`). The terminal table fits 100 columns: one column per
+task family, or per task of one family (``family=``) or of a list (``tasks=``).
 
 Every submitted string is treated as data: escaped with ``html.escape`` in HTML
 (:mod:`swarmloc.leaderboard.html_site`), shown as literal ``rich.text.Text`` in the
@@ -12,14 +14,16 @@ terminal, and guarded against spreadsheet formula injection in CSV.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
+import re
 import sys
-import contextlib
 from collections.abc import Iterator, Sequence
 from typing import Any, Literal
 
+from rich import box
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
@@ -27,18 +31,32 @@ from rich.text import Text
 from swarmloc.leaderboard.errors import StoreError
 from swarmloc.leaderboard.html_site import render_html
 from swarmloc.leaderboard.ranking import (
+    Column,
+    Standing,
+    SuiteBoard,
     by_suite,
-    fmt,
-    fmt_ci,
-    short_task,
+    column_score,
+    family_columns,
+    fmt_pct,
+    fmt_times,
     split_ranked,
-    status,
-    suite_tasks,
+    suite_boards,
+    task_columns,
     task_rmse,
 )
 from swarmloc.leaderboard.store import LeaderboardEntry, LeaderboardStore
 
 ExportFormat = Literal["csv", "json"]
+
+#: the terminal table is laid out for this many columns
+TERMINAL_WIDTH = 100
+LEGEND_STYLE = "dim"
+#: method names wider than this fold onto a second line
+METHOD_WIDTH = 20
+#: column headers are broken into lines of at most this many characters where they can be
+HEADER_WIDTH = 7
+#: at most this many task columns (``tasks=``); more would not fit TERMINAL_WIDTH
+MAX_TASK_COLUMNS = 6
 
 
 # -- terminal ------------------------------------------------------------------------
@@ -62,72 +80,135 @@ def open_store_or_refuse(db_url: str | None, console: Console | None = None) -> 
         yield store
 
 
-def _rich_table(title: str, entries: Sequence[LeaderboardEntry], tasks: Sequence[str],
-                ranked: bool) -> Table:
-    table = Table(title=title, title_justify="left", header_style="bold")
-    number: dict[str, Any] = {"justify": "right"}
-    headers: list[tuple[str, dict[str, Any]]] = [("#", number)] if ranked else []
-    headers += [("Method", {"min_width": 12}), ("Track", {"justify": "center"}),
-                ("Score", number), ("IQM", number), ("95% CI", number)]
-    headers += [(f"RMSE {short_task(task)} [m]", number) for task in tasks]
-    headers += [("Delay [ms]", number), ("Energy [J]", number), ("Jitter", number),
-                ("Status", {})]
-    for header, options in headers:
-        # Text, not str: rich would read "[ms]" as markup.
-        table.add_column(Text(header), **options)
-    for rank, entry in enumerate(entries, start=1):
-        cells: list[Text] = [Text(str(rank))] if ranked else []
-        cells += [
-            Text(entry.name),
-            Text(entry.track),
-            Text(fmt(entry.score.mean if entry.score else None)),
-            Text(fmt(entry.score.iqm if entry.score else None)),
-            Text(fmt_ci(entry)),
-            *(Text(fmt(task_rmse(entry, task))) for task in tasks),
-            Text(fmt(entry.delay_ms, 2)),
-            Text(fmt(entry.energy_j, 3)),
-            Text(fmt(entry.jitter, 4)),
-            Text(status(entry)),
-        ]
+def stacked_header(label: str, width: int = HEADER_WIDTH) -> str:
+    """A column header in lines of at most ``width`` characters, broken at CamelCase and digits.
+
+    >>> stacked_header("HybridNoise10"), stacked_header("CascadedFaultRandom"), stacked_header("Scale32")
+    ('Hybrid\\nNoise10', 'Cascaded\\nFault\\nRandom', 'Scale32')
+
+    A word longer than ``width`` keeps its own line whole.
+    """
+    words = re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+|[^A-Za-z\d]+", label) or [label]
+    lines: list[str] = []
+    for word in words:
+        if lines and len(lines[-1]) + len(word) <= width:
+            lines[-1] += word
+        else:
+            lines.append(word)
+    return "\n".join(lines)
+
+
+def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_tasks: int, ranked: bool) -> Table:
+    # SIMPLE_HEAD draws a space between columns; no padding beside it, so seven families fit TERMINAL_WIDTH.
+    table = Table(header_style="bold", box=box.SIMPLE_HEAD, padding=0, show_edge=False)
+    number: dict[str, Any] = {"justify": "right", "no_wrap": True}
+    if ranked:
+        table.add_column(Text("#"), **number)
+    table.add_column(Text("Method"), overflow="fold", max_width=METHOD_WIDTH)
+    table.add_column(Text("Trk"), justify="center", no_wrap=True)
+    table.add_column(Text("2^S"), **number)
+    table.add_column(Text("95% CI"), **number)
+    table.add_column(Text("Gap"), **number)
+    table.add_column(Text("Tasks"), **number)
+    for column in columns:
+        # Text, not str: rich would read "[...]" in a submitted task ID as markup.
+        table.add_column(Text(stacked_header(column.header)), **number)
+    for standing in standings:
+        score = standing.score
+        k, n = standing.coverage(n_tasks)
+        cells = [Text(str(standing.rank))] if ranked else []
+        ci = "—" if score is None else "–".join(fmt_times(x) for x in score.times_ci)
+        cells += [Text(standing.entry.name), Text(standing.entry.track),
+                  Text(fmt_times(score.times if score else None)), Text(ci),
+                  Text(fmt_pct(score.gap_closed if score else None)), Text(f"{k}/{n}")]
+        for column in columns:
+            cs = column_score(score, column)
+            cells.append(Text("—" if cs is None else fmt_times(cs.times) + ("" if cs.covered == cs.total else "*")))
         table.add_row(*cells)
     return table
 
 
-def leaderboard_tables(store: LeaderboardStore, suite: str | None = None) -> list[Table]:
-    """Rich tables: per suite, the ranked methods, then the privileged ones (if any).
+def board_columns(board: SuiteBoard, family: str | None = None, tasks: str | Sequence[str] | None = None) -> list[Column]:
+    """The task columns of a board: per family by default, else per task of ``family`` / ``tasks``.
+
+    Raises:
+        ValueError: an unknown family or task, or more than ``MAX_TASK_COLUMNS`` tasks.
+    """
+    if family is None and tasks is None:
+        return family_columns(board.tasks)
+    columns = task_columns(board.tasks, family, tasks)
+    if len(columns) > MAX_TASK_COLUMNS:
+        raise ValueError(f"{len(columns)} task columns do not fit a {TERMINAL_WIDTH}-column terminal; "
+                         f"name at most {MAX_TASK_COLUMNS} tasks (or one family)")
+    return columns
+
+
+def board_tables(board: SuiteBoard, family: str | None = None,
+                 tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
+    """The terminal view of one suite: ranked, partial-coverage and privileged tables, then a legend.
+
+    Args:
+        board: the suite's board.
+        family, tasks: per-task columns of one family or of these tasks (see :func:`board_columns`).
+    """
+    columns = board_columns(board, family, tasks)
+    n = len(board.tasks)
+    suite = f"{board.name} v{board.version}"
+    # titles as their own lines: a table title would wrap at the (narrower) table's width
+    out: list[Table | Text] = [Text(f"swarmloc leaderboard — suite {suite} (ranked by score v1, 2^S)", style="bold")]
+    if board.ranked:
+        out.append(_rich_table(board.ranked, columns, n, ranked=True))
+    else:
+        out.append(Text("No ranked methods: none has a score v1 on every task of the suite.", style="italic"))
+    if board.partial:
+        out += [Text(f"Partial coverage on {suite} (ranked apart; 2^S over the covered tasks only)", style="bold"),
+                _rich_table(board.partial, columns, n, ranked=True)]
+    if board.privileged:
+        out += [Text(f"Privileged methods on {suite} (use ground truth; not ranked)", style="bold"),
+                _rich_table(board.privileged, columns, n, ranked=False)]
+    what = "family" if family is None and tasks is None else "task"
+    legend = (f"2^S: × lower error than the standard CEKF (uniform), geometric mean over tasks, stratified-"
+              f"bootstrap 95% CI. Gap: share of the achievable gain (to the information bound) closed, mean "
+              f"over tasks where it is defined. Tasks: covered/total. {what.capitalize()} columns: × uniform "
+              f"over the {what}'s tasks (* some not covered).")
+    if board.filled:
+        ref = board.reference
+        legend += (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"
+                   f" (#{ref.id if ref else '?'}): their results files predate it.")
+    out.append(Text(legend, style=LEGEND_STYLE))
+    return out
+
+
+def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family: str | None = None,
+                       tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
+    """Rich renderables: per suite, the tables of :func:`board_tables`.
 
     Args:
         store: The store to read.
         suite: Only this suite name (all suites when None).
+        family, tasks: per-task columns of one family or of these tasks (default: per family).
 
     Returns:
-        The tables, in display order (empty when the store has no entries).
+        The tables and legends, in display order (empty when the store has no entries).
+
+    Raises:
+        ValueError: an unknown family or task (see :func:`board_columns`).
     """
-    tables = []
-    for (name, version), entries in by_suite(store.entries(suite)).items():
-        tasks = suite_tasks(entries)
-        ranked, privileged = split_ranked(entries)
-        title = f"swarmloc leaderboard — suite {name} v{version} (ranked by mean normalized score)"
-        tables.append(_rich_table(title, ranked, tasks, ranked=True))
-        if privileged:
-            tables.append(_rich_table(
-                f"Privileged methods on {name} v{version} (use ground truth; not ranked)",
-                privileged, tasks, ranked=False,
-            ))
-    return tables
+    return [part for board in suite_boards(store.entries(suite)) for part in board_tables(board, family, tasks)]
 
 
-def print_leaderboard(
-    store: LeaderboardStore, suite: str | None = None, console: Console | None = None
-) -> None:
+def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console: Console | None = None,
+                      family: str | None = None, tasks: str | Sequence[str] | None = None) -> None:
     """Print the terminal leaderboard (see :func:`leaderboard_tables`)."""
-    # Piped output has no terminal to fit; keep the wide table readable there.
-    out = console or (Console() if sys.stdout.isatty() else Console(width=240))
-    tables = leaderboard_tables(store, suite)
-    if not tables:
+    # Piped output has no terminal width to fit: use the width the table is laid out for.
+    out = console or (Console() if sys.stdout.isatty() else Console(width=TERMINAL_WIDTH))
+    parts = leaderboard_tables(store, suite, family, tasks)
+    if not parts:
         out.print(Text(f"The leaderboard at {store.url} is empty."))
-    for table in tables:
-        out.print(table)
+    for part in parts:
+        out.print(part)
+        if isinstance(part, Text) and part.style == LEGEND_STYLE:
+            out.print()
 
 
 # -- export --------------------------------------------------------------------------
@@ -135,40 +216,56 @@ def print_leaderboard(
 
 def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
     rows = []
-    for (_name, _version), group in by_suite(entries).items():
-        tasks = suite_tasks(group)
-        ranked, privileged = split_ranked(group)
-        for rank, entry in [(i, e) for i, e in enumerate(ranked, 1)] + [(None, e) for e in privileged]:
-            score = entry.score
-            row: dict[str, Any] = {
-                "id": entry.id,
-                "suite": entry.suite_name,
-                "suite_version": entry.suite_version,
-                "rank": rank,
-                "name": entry.name,
-                "authors": entry.authors,
-                "url": entry.url,
-                "track": entry.track,
-                "privileged": entry.privileged,
-                "deterministic": entry.deterministic,
-                "verified": entry.verified,
-                "trusted": entry.trusted,
-                "score_mean": score.mean if score else None,
-                "score_iqm": score.iqm if score else None,
-                "score_ci_low": score.ci_low if score else None,
-                "score_ci_high": score.ci_high if score else None,
-                "delay_ms": entry.delay_ms,
-                "energy_j": entry.energy_j,
-                "jitter": entry.jitter,
-            }
-            for task in tasks:
-                row[f"rmse[{task}]"] = task_rmse(entry, task)
-            row.update(
-                entry_point=entry.entry_point,
-                method_hash=entry.method_hash,
-                created_utc=entry.created_utc.isoformat(),
-            )
-            rows.append(row)
+    for board in suite_boards(entries):
+        for table, standings in (("ranked", board.ranked), ("partial", board.partial),
+                                 ("privileged", board.privileged)):
+            for standing in standings:
+                entry, score = standing.entry, standing.score
+                k, n = standing.coverage(len(board.tasks))
+                v0 = entry.score
+                row: dict[str, Any] = {
+                    "id": entry.id,
+                    "suite": entry.suite_name,
+                    "suite_version": entry.suite_version,
+                    "rank": standing.rank if table == "ranked" else None,
+                    "name": entry.name,
+                    "authors": entry.authors,
+                    "url": entry.url,
+                    "track": entry.track,
+                    "privileged": entry.privileged,
+                    "deterministic": entry.deterministic,
+                    "verified": entry.verified,
+                    "trusted": entry.trusted,
+                    "table": table,
+                    "partial_rank": standing.rank if table == "partial" else None,
+                    "times_uniform": score.times if score else None,
+                    "times_ci_low": score.times_ci[0] if score else None,
+                    "times_ci_high": score.times_ci[1] if score else None,
+                    "S": score.S if score else None,
+                    "iqm_gain": score.iqm if score else None,
+                    "gap_closed": score.gap_closed if score else None,
+                    "tasks_covered": k,
+                    "tasks_total": n,
+                    "uniform_rmse_filled": standing.filled,
+                    "v0_score_mean": v0.mean if v0 else None,
+                    "v0_score_iqm": v0.iqm if v0 else None,
+                    "v0_score_ci_low": v0.ci_low if v0 else None,
+                    "v0_score_ci_high": v0.ci_high if v0 else None,
+                    "delay_ms": entry.delay_ms,
+                    "energy_j": entry.energy_j,
+                    "jitter": entry.jitter,
+                }
+                for task in board.tasks:
+                    t = score.tasks.get(task) if score else None
+                    row[f"times[{task}]"] = None if t is None else 2.0**t.mean
+                    row[f"gap_closed[{task}]"] = None if t is None else t.gap_closed
+                    row[f"rmse[{task}]"] = task_rmse(entry, task)
+                row.update(
+                    entry_point=entry.entry_point,
+                    method_hash=entry.method_hash,
+                    created_utc=entry.created_utc.isoformat(),
+                )
+                rows.append(row)
     return rows
 
 
@@ -182,9 +279,13 @@ def _csv_safe(value: Any) -> Any:
 def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | None = None) -> str:
     """The leaderboard as CSV or JSON text.
 
-    One row per submission: suite, rank (empty for privileged methods), metadata, the
-    normalized score (mean, IQM, CI), mean delay/energy/jitter, per-task mean RMSE
-    (``rmse[<task>]``), entry point, method hash, submission time. JSON rows also carry
+    One row per submission, in board order: suite, rank (empty outside the ranked table),
+    metadata, ``table`` (``ranked``, ``partial`` or ``privileged``) and ``partial_rank``,
+    score v1 (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
+    ``tasks_covered``/``tasks_total``, ``uniform_rmse_filled`` — episodes scored through the
+    uniform fallback), the v0 normalized score (``v0_score_*``), mean delay/energy/jitter,
+    per task ``times[<task>]`` (2^G_t), ``gap_closed[<task>]`` and the mean RMSE
+    ``rmse[<task>]``, entry point, method hash, submission time. JSON rows also carry
     ``task_aggregates`` (every metric's mean, IQM and CI per task). Text cells in CSV
     that start with ``= + - @`` are prefixed with ``'`` so spreadsheets do not run them.
 
@@ -220,12 +321,14 @@ def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | N
 
 
 __all__ = [
+    "TERMINAL_WIDTH",
     "ExportFormat",
+    "board_columns",
+    "board_tables",
     "by_suite",
     "export",
     "leaderboard_tables",
     "print_leaderboard",
     "render_html",
     "split_ranked",
-    "suite_tasks",
 ]

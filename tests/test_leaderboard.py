@@ -445,22 +445,24 @@ def test_terminal_view_and_exports(db_url: str, tmp_path: Path) -> None:
     oracle = H.make_results_file(tmp_path / "o.json", "lb_fake_runner:good_o", privileged=True)
     _submit(oracle, "lb_fake_runner:good_o", db_url,
             {"name": "=HYPERLINK(\"x\") [bold]oracle[/bold]", "track": "A", "privileged": True})
-    console = Console(record=True, width=250, file=io.StringIO())
+    console = Console(record=True, width=100, file=io.StringIO())
     with LeaderboardStore(db_url) as store:
         views.print_leaderboard(store, console=console)
         text = console.export_text()
         assert "seed method" in text and "[bold]oracle[/bold]" in text
         assert text.index("Privileged methods") < text.index("[bold]oracle")
-        for header in ("Score", "IQM", "95% CI", "RMSE Ideal-v0 [m]", "Delay [ms]", "Energy [J]", "Jitter"):
+        # no uniform entry in this store, so no score v1: nothing is ranked (test_leaderboard_views.py ranks)
+        assert "No ranked methods" in text and text.index("Partial coverage") < text.index("seed method")
+        for header in ("2^S", "95% CI", "Gap", "Tasks", "Ideal", "NLOS"):
             assert header in text
         csv_text = views.export(store, "csv")
         rows = csv_text.splitlines()
         assert rows[0].startswith("id,suite,suite_version,rank,name,")
-        assert "rmse[swarmloc/Ideal-v0]" in rows[0]
-        assert len(rows) == 3 and rows[1].startswith("1,tiny-test,1,1,seed method")
+        assert "rmse[swarmloc/Ideal-v0]" in rows[0] and "times[swarmloc/Ideal-v0]" in rows[0]
+        assert len(rows) == 3 and rows[1].startswith("1,tiny-test,1,,seed method")
         assert "'=HYPERLINK" in rows[2]  # formula neutralized
         data = json.loads(views.export(store, "json"))
-        assert [row["rank"] for row in data] == [1, None]
+        assert [(row["rank"], row["table"]) for row in data] == [(None, "partial"), (None, "privileged")]
         assert data[1]["name"].startswith("=HYPERLINK")  # JSON keeps the exact text
         assert set(data[0]["task_aggregates"][H.TASKS[0]]["rmse"]) == {"mean", "iqm", "ci_low", "ci_high"}
         with pytest.raises(ValueError, match="unknown export format 'xml'"):

@@ -1,4 +1,4 @@
-"""The generated leaderboard site in headless Chromium: it loads, lists, and sorts.
+"""The generated leaderboard site in headless Chromium: it loads, lists, sorts, and shows its plots.
 
 Needs Debian's Chromium at /usr/bin/chromium (``apt-get install chromium``; ``.ci/run``
 installs it) and the Playwright Python client. A screenshot goes to ``test-artifacts/``.
@@ -31,6 +31,9 @@ def _build_site(tmp_path: Path) -> Path:
     methods = [("mid", 0.0, False), ("high", 0.4, False), ("low", -0.3, False),
                ("oracle", 0.6, True)]
     with LeaderboardStore(url) as store:
+        # the reference of score v1 (these results files carry no uniform_rmse: the views take it from here)
+        uniform = H.make_results_file(tmp_path / "uniform.json", "uniform")
+        submit(uniform, "uniform", {"name": "uniform", "track": "A"}, trust=True, **H.submit_options(url), store=store)
         for name, offset, privileged in methods:
             entry = f"lb_fake_runner:good_{name}"
             path = H.make_results_file(
@@ -41,7 +44,8 @@ def _build_site(tmp_path: Path) -> Path:
             # The fake runner reproduces the unshifted metrics; accept the shift here.
             submit(path, entry, {"name": name, "track": "A", "privileged": privileged},
                    **(H.submit_options(url) | {"tolerance": Tolerance(abs=1.0)}), store=store)
-        return render_html(store, tmp_path / "site")
+        # per-method plots would re-run episodes (the fake methods cannot); the suite plots are drawn
+        return render_html(store, tmp_path / "site", plots=False)
 
 
 def test_page_loads_shows_one_row_per_method_and_sorts(tmp_path: Path) -> None:
@@ -68,23 +72,38 @@ def test_page_loads_shows_one_row_per_method_and_sorts(tmp_path: Path) -> None:
                 return page.locator(f"{ranked} tbody tr td:nth-child(2)").all_inner_texts()
 
             assert page.title() == "swarmloc leaderboard"
-            assert page.locator(f"{ranked} tbody tr").count() == 3  # one row per method
-            assert names() == ["high", "mid", "low"]  # ranked by score
+            assert page.locator(f"{ranked} tbody tr").count() == 4  # one row per method
+            # ranked by score v1: "mid" ties uniform (the same RMSE), which is older
+            assert names() == ["high", "uniform", "mid", "low"]
             privileged = page.locator("#privileged-tiny-test-1 tbody tr td:first-child")
             assert privileged.all_inner_texts() == ["oracle"]
 
             method_header = page.locator(f"{ranked} thead th", has_text="Method")
             method_header.locator("button").click()
-            assert names() == ["high", "low", "mid"]
+            assert names() == ["high", "low", "mid", "uniform"]
             assert method_header.get_attribute("aria-sort") == "ascending"
             method_header.locator("button").click()
-            assert names() == ["mid", "low", "high"]
+            assert names() == ["uniform", "mid", "low", "high"]
             assert method_header.get_attribute("aria-sort") == "descending"
-            page.locator(f"{ranked} thead th", has_text="Score").locator("button").click()
-            assert names() == ["low", "mid", "high"]
+            score_header = page.locator(f"{ranked} thead th", has_text="2^S")
+            score_header.locator("button").click()
+            assert names()[0] == "low" and names()[-1] == "high"  # ascending 2^S
             assert method_header.get_attribute("aria-sort") is None
+            score_header.locator("button").click()
+            assert names()[0] == "high" and names()[-1] == "low"
+
+            # the suite plots, drawn by matplotlib at build time, are on the page and decoded
+            plots = page.locator(".suite-plots img")
+            assert plots.count() == 3  # score with CI, gain heatmap, performance profiles
+            for i in range(plots.count()):
+                img = plots.nth(i)
+                img.scroll_into_view_if_needed()
+                page.wait_for_function("img => img.complete", arg=img.element_handle(), timeout=10_000)
+                assert img.evaluate("img => img.naturalWidth") > 0, img.get_attribute("src")
+            assert page.locator(".suite-plots figcaption").first.inner_text().startswith("2^S per method")
 
             ARTIFACTS.mkdir(exist_ok=True)
+            page.evaluate("window.scrollTo(0, 0)")  # sticky table headers follow the scroll
             page.screenshot(path=str(ARTIFACTS / "leaderboard.png"), full_page=True)
 
             page.locator(f"{ranked} a", has_text="high").click()

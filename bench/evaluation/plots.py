@@ -10,6 +10,9 @@ written by ``swarmloc evaluate``; when it is missing, that episode is re-run):
   time, coloured by channel kind, labelled faults marked;
 * ``trajectory_<task>.png`` — truth and estimated x–y trajectories per method.
 
+Lines of a method have its colour and line style from
+:func:`swarmloc.bench.evaluation.method_style.method_styles`, the same in every figure.
+
 Several results files (one per method) share the figures, so methods are compared.
 """
 
@@ -28,6 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from swarmloc.agents.registry import load_method  # noqa: E402
+from swarmloc.bench.evaluation.method_style import method_styles  # noqa: E402
 from swarmloc.bench.evaluation.results import load_results  # noqa: E402
 from swarmloc.bench.evaluation.runner import Trace, read_traces, rollout, traces_path  # noqa: E402
 from swarmloc.envs.channels import KIND_NAMES  # noqa: E402
@@ -106,8 +110,9 @@ def plot_error_vs_time(traces: Sequence[Trace], path: Path) -> Path:
     """Mean error of the scored UAVs vs time, one line per method (same task)."""
     fig, ax = plt.subplots(figsize=(8, 4))
     _shade(ax, _fault_spans(traces[0]))
+    styles = method_styles(tr.method for tr in traces)
     for tr in traces:
-        ax.plot(tr.times, tr.errors[:, tr.scored].mean(axis=1), lw=1.2, label=tr.method)
+        ax.plot(tr.times, tr.errors[:, tr.scored].mean(axis=1), lw=1.2, label=tr.method, **styles[tr.method].line())
     ax.set(xlabel="time [s]", ylabel="mean position error [m]", yscale="log",
            title=f"{short_name(traces[0].task)} — error vs time (seed {traces[0].seed})")
     ax.grid(alpha=0.3)
@@ -118,10 +123,11 @@ def plot_error_vs_time(traces: Sequence[Trace], path: Path) -> Path:
 def plot_error_cdf(traces: Sequence[Trace], path: Path) -> Path:
     """Empirical CDF of the error of the scored UAVs over every step, per method."""
     fig, ax = plt.subplots(figsize=(6, 4))
+    styles = method_styles(tr.method for tr in traces)
     for tr in traces:
         e = np.sort(tr.errors[:, tr.scored].ravel())
         q = np.linspace(0.0, 1.0, min(CDF_POINTS, e.size))
-        ax.plot(np.quantile(e, q), q, lw=1.2, label=tr.method)
+        ax.plot(np.quantile(e, q), q, lw=1.2, label=tr.method, **styles[tr.method].line())
     ax.axhline(0.9, color="0.5", lw=0.8, ls="--")
     ax.set(xlabel="position error [m]", ylabel="fraction of UAV-steps", xscale="log",
            title=f"{short_name(traces[0].task)} — error CDF (seed {traces[0].seed})")

@@ -1,0 +1,94 @@
+"""Task families: which tasks the leaderboard and the reports group into one column.
+
+A task's family comes from its ID: drop the ``swarmloc/`` namespace and the ``-v<N>``
+version, then a trailing ``Random`` (the randomized variant) and trailing digits (a
+swarm size or a contamination percentage), which leaves the task's *base* name::
+
+    swarmloc/Scale32-v0 → Scale32 → Scale            swarmloc/HybridNoise10-v0 → HybridNoise
+    swarmloc/CascadedFaultRandom-v0 → CascadedFault  swarmloc/NLOSStep-v0 → NLOSStep
+
+``FAMILY_OF_BASE`` then names the family of each base (NLOS and NLOSStep are one family,
+VisionLoss and Indoor are the pf-nn scenarios, UTILFlight is the real flight data). A base
+missing from the table is a family of its own, so a new task never disappears from a view.
+This module is the one place that defines families; everything that groups tasks imports it.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+NAMESPACE = "swarmloc/"
+
+#: base name → family (see the module docstring for how a base is derived from a task ID)
+FAMILY_OF_BASE: dict[str, str] = {
+    "Ideal": "Ideal",
+    "NLOS": "NLOS",
+    "NLOSStep": "NLOS",
+    "Scale": "Scale",
+    "CascadedFault": "Cascaded",
+    "VisionLoss": "Vision",
+    "Indoor": "Vision",
+    "HybridNoise": "Hybrid",
+    "GradualFault": "Gradual",
+    "AnchorFree": "AnchorFree",
+    "UTILFlight": "Real",
+}
+
+#: display order of the families (one not listed here comes after these, in order of appearance)
+FAMILY_ORDER: tuple[str, ...] = (
+    "Ideal", "NLOS", "Scale", "Cascaded", "Vision", "Hybrid", "Gradual", "AnchorFree", "Real",
+)
+
+_VERSION = re.compile(r"-v\d+$")
+_VARIANT = re.compile(r"(?:Random)?\d*(?:Random)?$")
+
+
+def short_task(task: str) -> str:
+    """``swarmloc/Scale32-v0`` → ``Scale32-v0`` (the ID without its namespace)."""
+    return task.removeprefix(NAMESPACE)
+
+
+def task_label(task: str) -> str:
+    """``swarmloc/Scale32-v0`` → ``Scale32`` (no namespace, no version): a column header."""
+    return _VERSION.sub("", short_task(task))
+
+
+def task_base(task: str) -> str:
+    """The task's base name: its label without a ``Random`` variant suffix and trailing digits.
+
+    >>> task_base("swarmloc/CascadedFaultRandom-v0"), task_base("HybridNoise30-v1")
+    ('CascadedFault', 'HybridNoise')
+    """
+    label = task_label(task)
+    return _VARIANT.sub("", label) or label
+
+
+def task_family(task: str) -> str:
+    """The family of a task ID (``FAMILY_OF_BASE`` of its base; the base itself if unlisted).
+
+    >>> task_family("swarmloc/Scale16-v0"), task_family("swarmloc/Indoor-v0")
+    ('Scale', 'Vision')
+    """
+    base = task_base(task)
+    return FAMILY_OF_BASE.get(base, base)
+
+
+def group_by_family(tasks: Iterable[str]) -> dict[str, list[str]]:
+    """Tasks grouped by family, families in ``FAMILY_ORDER`` (others after, as they appear).
+
+    Args:
+        tasks: task IDs; their order is kept within each family.
+
+    Returns:
+        family → its tasks.
+    """
+    groups: dict[str, list[str]] = {}
+    for task in tasks:
+        groups.setdefault(task_family(task), []).append(task)
+    rank = {family: i for i, family in enumerate(FAMILY_ORDER)}
+    order = sorted(groups, key=lambda f: (rank.get(f, len(rank)), list(groups).index(f)))
+    return {family: groups[family] for family in order}
+
+
+__all__ = ["FAMILY_OF_BASE", "FAMILY_ORDER", "group_by_family", "short_task", "task_base", "task_family", "task_label"]
