@@ -144,7 +144,7 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
     return flops
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
     """Predict every UAV of every episode; copy the prior positions to ``prior_pos``."""
     n_b, n = x.shape[0], x.shape[1]
@@ -156,7 +156,7 @@ def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
                 prior_pos[b, i, d] = x[b, i, d]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
                 alpha_th, alpha_min, active, flops):
     """Trust-weighted joint update of every UAV of every episode (in place).
@@ -175,7 +175,7 @@ def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, pri
                                     active[b, i], x0, hvec, c)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
              alpha_th, alpha_min, est):
     """Filter whole sequences: T predict+update steps per episode in one call.
@@ -258,7 +258,7 @@ def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos
             pred[l] = math.sqrt(dist2) if ch != GPS else 0.0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos,
                      resid, pred, nis):
     """Per-channel innovation features at the prior (before the policy picks trust).

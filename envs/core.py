@@ -11,39 +11,20 @@ wraps this class; none holds physics.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from . import cekf
-from .core_kernel import FilterArrays, core_step, step_episodes
+from .core_kernel import FilterArrays, core_step, make_handle
 from .specs import TaskSpec
 from .world import World
 from .worlds import AnyWorld, make_world
 
-#: below this batch size the kernels run on the calling thread: a parallel region over a
-#: handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
+#: below this batch size the step kernel runs on the calling thread: a parallel region over
+#: a handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
 #: spin-wait for their turn can make one step take tens of milliseconds
 SERIAL_BELOW = 32
-
-
-def small_batch_serial(method):
-    """Run a core method with one numba thread when the core's batch is small."""
-
-    @functools.wraps(method)
-    def wrapper(self, *args, **kwargs):
-        threads = numba.get_num_threads()
-        if self.batch_size >= SERIAL_BELOW or threads == 1:
-            return method(self, *args, **kwargs)
-        numba.set_num_threads(1)
-        try:
-            return method(self, *args, **kwargs)
-        finally:
-            numba.set_num_threads(threads)
-
-    return wrapper
 
 
 @dataclass
@@ -135,19 +116,14 @@ class LinkTrustCore:
             prior_pos=self._prior_pos, imu_prev=np.zeros_like(buf.imu), resid=o.resid, pred=o.pred, nis=o.nis,
             valid=o.valid, jerk=o.jerk, estimate=o.estimate, truth=o.truth, label=o.label,
             update_valid=o.update_valid, applied=o.applied, prev_trust=o.prev_trust, active=o.active, flops=o.flops,
-            steps=o.steps, done=o.done,
+            steps=o.steps, done=o.done, moving=np.zeros(self.batch_size, dtype=bool),
         )
         # a simulated world senses inside the kernel; any other world senses in Python first
-        self._world_inputs = (w.inputs, w.schedule) if isinstance(w, World) else (None, None)
+        self._senses = isinstance(w, World)
+        self._handle = make_handle(w.inputs, w.schedule, self._filter) if self._senses else None
+        self._filter_only = make_handle(None, None, self._filter)
+        self._serial = self.batch_size < SERIAL_BELOW
         self._everyone = np.ones(self.batch_size, dtype=bool)
-
-    def _kernel(self, trust: np.ndarray, score: bool, advance: np.ndarray, sense: bool) -> None:
-        """Run ``core_kernel.core_step`` (on the calling thread for a small batch)."""
-        w, fs = self._world_inputs if sense else (None, None)
-        if self.batch_size < SERIAL_BELOW:
-            step_episodes(w, fs, self._filter, trust, score, advance, 0, self.batch_size)
-        else:
-            core_step(w, fs, self._filter, trust, score, advance)
 
     def _advance(self, mask: np.ndarray | None = None, trust: np.ndarray | None = None) -> None:
         """Score the pending update with ``trust`` (if given), then sense and predict the next step.
@@ -157,12 +133,12 @@ class LinkTrustCore:
         """
         go = self._everyone if mask is None else mask
         score = trust is not None
-        if self._world_inputs[0] is not None:
-            self._kernel(trust if score else self._out.applied, score, go, sense=True)
+        if self._senses:
+            core_step(self._handle, trust if score else self._out.applied, score, go, self._serial)
             return
         w, f = self.world, self._filter
         if score:
-            self._kernel(trust, True, ~self._everyone, sense=False)
+            core_step(self._filter_only, trust, True, ~self._everyone, self._serial)
             go = go & ~f.done
         keep = ~go
         saved = [a[keep].copy() for a in self._world_state()] if keep.any() else []
@@ -170,10 +146,9 @@ class LinkTrustCore:
         w.sense()
         for array, value in zip(self._world_state(), saved):
             array[keep] = value
-        self._kernel(self._out.applied, False, go, sense=False)
+        core_step(self._filter_only, self._out.applied, False, go, self._serial)
 
     # ------------------------------------------------------------------ API
-    @small_batch_serial
     def reset(self, seeds: np.ndarray | list[int], mask: np.ndarray | None = None) -> CoreStep:
         """Start (some) episodes and return their first pending features.
 
@@ -216,7 +191,6 @@ class LinkTrustCore:
         # optional buffers such as VO velocity are None when absent
         return [w.steps] + [a for a in vars(w.buffers).values() if isinstance(a, np.ndarray)]
 
-    @small_batch_serial
     def step(self, trust: np.ndarray) -> CoreStep:
         """Apply ``trust`` to the pending update and advance.
 

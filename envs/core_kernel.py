@@ -1,23 +1,23 @@
 """The link-trust core's step as one kernel: score the pending update, then sense, predict
-and featurize the next step, episode by episode.
+and featurize the next step.
 
-``FilterArrays`` names the CEKF state and the ``CoreStep`` outputs; ``core_step`` runs one
-step of every episode in one call, threads over blocks of episodes (``step_episodes`` runs
-a range of episodes on the calling thread, for small batches). Per episode b, with trust α
-(scoring):
+``FilterArrays`` names the CEKF state and the ``CoreStep`` outputs. ``step_episodes`` steps
+a range of episodes; ``core_step`` steps the batch in one call (threads over blocks of
+episodes, or the calling thread for a small batch) and takes its named tuples through a
+``StepHandle``. Per episode b, with trust α (scoring):
 
 1. posterior at the pending step k: the trust-weighted joint update (``cekf.update_uav``);
-   estimate, truth, labels, trust and FLOPs of the update are written out, the episode
-   counts one more update and is done after ``n_steps``;
-2. if it goes on: the world senses step k+1 (``world_kernel.sense_episode``; skipped when
+   estimate, truth, labels, validity, trust and FLOPs of the update are written out; the
+   episode counts one more update and is done after ``n_steps``;
+2. if it goes on: the world senses step k+1 (``world_kernel.sense_episodes``; skipped when
    the world inputs are None, for worlds that sense in Python), every UAV predicts to it
    (``cekf.predict_uav``) and the per-channel innovation features at the prior are
    computed (``cekf.features_uav``), with the IMU jerk ‖u(k+1) − u(k)‖.
 
-Without scoring (after a reset) only step 2 runs, for the episodes in ``advance``. The
-numbers are those of the separate kernels (``cekf_update``, ``cekf_predict``,
-``channel_features``) applied to the whole batch: every episode's arithmetic is the same
-sequence of operations, only fused, so the results are bit-identical.
+Without scoring (after a reset) only step 2 runs, for the episodes in ``advance``. Every
+episode goes through the same operations, in the same order, as with the separate batch
+kernels (``cekf_update``, ``cekf_predict``, ``channel_features``): the results are
+bit-identical, only fused.
 """
 
 from __future__ import annotations
@@ -27,14 +27,16 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+from numba.core import types
+from numba.experimental import structref
 
 from .cekf import features_uav, predict_uav, update_uav
 from .faults import FaultSchedule
-from .world_kernel import BLOCK, WorldInputs, block_bounds, sense_episode
+from .world_kernel import BLOCK, WorldInputs, block_bounds, sense_episodes
 
 
 class FilterArrays(NamedTuple):
-    """The CEKF backbone and the step outputs of B episodes (``core_step``'s second argument).
+    """The CEKF backbone and the step outputs of B episodes (``step_episodes``' third argument).
 
     Shapes: B episodes, N UAVs, L channel slots per UAV, A anchors, M landmarks.
 
@@ -61,6 +63,9 @@ class FilterArrays(NamedTuple):
         estimate, truth: ``(B, N, 3)``; label, update_valid, applied, prev_trust, active
         ``(B, N, L)``; flops ``(B, N)`` of the last update.
         steps: ``(B,)`` int64 updates done; done ``(B,)`` bool.
+
+    Work array:
+        moving: ``(B,)`` bool, the episodes that advance in the current call.
     """
 
     dt: float
@@ -97,80 +102,13 @@ class FilterArrays(NamedTuple):
     flops: np.ndarray
     steps: np.ndarray
     done: np.ndarray
+    moving: np.ndarray
 
 
-@njit(cache=True, inline="always")
-def _score(f: FilterArrays, trust: np.ndarray, b: int, x0: np.ndarray, hvec: np.ndarray, c: np.ndarray) -> bool:
-    """Apply ``trust[b]`` to episode b's pending update and write the step outputs; returns whether it goes on.
-
-    A finished episode is updated too (its state is never scored again) but its outputs stay.
-    """
-    live = not f.done[b]
-    for i in range(f.x.shape[1]):
-        flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
-                           f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.alpha_th, f.alpha_min,
-                           f.active[b, i], x0, hvec, c)
-        if live:
-            f.flops[b, i] = flops
-            for d in range(3):
-                f.estimate[b, i, d] = f.x[b, i, d]
-                f.truth[b, i, d] = f.world_pos[b, i, d]
-            for l in range(f.kind.shape[1]):
-                f.label[b, i, l] = f.world_label[b, i, l]
-                f.update_valid[b, i, l] = f.world_valid[b, i, l]
-                f.prev_trust[b, i, l] = f.applied[b, i, l]
-                f.applied[b, i, l] = trust[b, i, l]
-    if live:
-        f.steps[b] += 1
-        f.done[b] = f.steps[b] >= f.n_steps
-    return not f.done[b]
-
-
-@njit(cache=True, inline="always")
-def _advance(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays, b: int, yv: np.ndarray,
-             S: np.ndarray) -> None:
-    """Sense episode b's next step (unless ``w`` is None), predict every UAV to it, write its features."""
-    n = f.x.shape[1]
-    if w is not None:
-        for i in range(n):
-            for d in range(3):
-                f.imu_prev[b, i, d] = f.world_imu[b, i, d]
-        sense_episode(w, fs, b)
-    q = f.imu_sigma * f.imu_sigma
-    for i in range(n):
-        predict_uav(f.x[b, i], f.P[b, i], f.world_imu[b, i], f.dt, q)
-        for d in range(3):
-            f.prior_pos[b, i, d] = f.x[b, i, d]
-    # features after every UAV has predicted: peer channels read the neighbours' priors
-    for i in range(n):
-        features_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], f.kind[i], f.target[i], f.r0[i],
-                     f.anchors, f.landmarks, f.prior_pos[b], f.resid[b, i], f.pred[b, i], f.nis[b, i], yv, S)
-        # jerk = ‖u(k+1) − u(k)‖
-        j0 = f.world_imu[b, i, 0] - f.imu_prev[b, i, 0]
-        j1 = f.world_imu[b, i, 1] - f.imu_prev[b, i, 1]
-        j2 = f.world_imu[b, i, 2] - f.imu_prev[b, i, 2]
-        f.jerk[b, i] = math.sqrt(j0 * j0 + j1 * j1 + j2 * j2)
-        for l in range(f.kind.shape[1]):
-            f.valid[b, i, l] = f.world_valid[b, i, l]
-
-
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays, trust: np.ndarray, score: bool,
                   advance: np.ndarray, lo: int, hi: int) -> None:
-    """One step of episodes lo..hi−1 on the calling thread (arguments as ``core_step``)."""
-    x0, hvec, c, yv, S = np.empty(6), np.empty(3), np.empty(6), np.empty(3), np.empty((3, 3))
-    for b in range(lo, hi):
-        go = advance[b]
-        if score:
-            go = _score(f, trust, b, x0, hvec, c) and go
-        if go:
-            _advance(w, fs, f, b, yv, S)
-
-
-@njit(cache=True, parallel=True)
-def core_step(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays, trust: np.ndarray, score: bool,
-              advance: np.ndarray) -> None:
-    """One step of every episode, threads over blocks of episodes.
+    """One step of episodes lo..hi−1 on the calling thread.
 
     Args:
         w, fs: the world kernel's inputs and fault schedule (None: the world has already
@@ -180,8 +118,115 @@ def core_step(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays, 
         score: apply ``trust`` and score the pending update first; then the episodes that
             are not done advance.
         advance: ``(B,)`` bool, the episodes allowed to advance.
+        lo, hi: the episodes to step.
+
+    The stages run over the whole range in turn (episodes do not interact, so the order is
+    free): score, sense, predict and featurize.
     """
+    n, n_l = f.kind.shape[0], f.kind.shape[1]
+    x0, hvec, c, yv, S = np.empty(6), np.empty(3), np.empty(6), np.empty(3), np.empty((3, 3))
+    # ---- score: posterior at the pending step; a finished episode is updated too (its
+    # state is never scored again) but its outputs stay
+    for b in range(lo, hi):
+        f.moving[b] = advance[b]
+        if not score:
+            continue
+        live = not f.done[b]
+        for i in range(n):
+            flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
+                               f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.alpha_th,
+                               f.alpha_min, f.active[b, i], x0, hvec, c)
+            if live:
+                f.flops[b, i] = flops
+                for d in range(3):
+                    f.estimate[b, i, d] = f.x[b, i, d]
+                    f.truth[b, i, d] = f.world_pos[b, i, d]
+                for l in range(n_l):
+                    f.label[b, i, l] = f.world_label[b, i, l]
+                    f.update_valid[b, i, l] = f.world_valid[b, i, l]
+                    f.prev_trust[b, i, l] = f.applied[b, i, l]
+                    f.applied[b, i, l] = trust[b, i, l]
+        if live:
+            f.steps[b] += 1
+            f.done[b] = f.steps[b] >= f.n_steps
+        f.moving[b] = advance[b] and not f.done[b]
+    # ---- sense the next step
+    if w is not None:
+        for b in range(lo, hi):
+            if f.moving[b]:
+                for i in range(n):
+                    for d in range(3):
+                        f.imu_prev[b, i, d] = f.world_imu[b, i, d]
+        sense_episodes(w, fs, f.moving, lo, hi)
+    # ---- predict to it, then the features (peer channels read the neighbours' priors)
+    q = f.imu_sigma * f.imu_sigma
+    for b in range(lo, hi):
+        if not f.moving[b]:
+            continue
+        for i in range(n):
+            predict_uav(f.x[b, i], f.P[b, i], f.world_imu[b, i], f.dt, q)
+            for d in range(3):
+                f.prior_pos[b, i, d] = f.x[b, i, d]
+        for i in range(n):
+            features_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], f.kind[i], f.target[i],
+                         f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.resid[b, i], f.pred[b, i], f.nis[b, i],
+                         yv, S)
+            # jerk = ‖u(k+1) − u(k)‖
+            j0 = f.world_imu[b, i, 0] - f.imu_prev[b, i, 0]
+            j1 = f.world_imu[b, i, 1] - f.imu_prev[b, i, 1]
+            j2 = f.world_imu[b, i, 2] - f.imu_prev[b, i, 2]
+            f.jerk[b, i] = math.sqrt(j0 * j0 + j1 * j1 + j2 * j2)
+            for l in range(n_l):
+                f.valid[b, i, l] = f.world_valid[b, i, l]
+
+
+
+@structref.register
+class StepHandleType(types.StructRef):
+    """numba type of a ``StepHandle``."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class StepHandle(structref.StructRefProxy):
+    """The step kernel's named tuples in one object: ``world``, ``faults``, ``filt``.
+
+    numba unboxes every array of a call's arguments, about 70 here: some 10 µs, most of a
+    one-episode step. A handle is one reference, built once per core (``make_handle``).
+    """
+
+
+structref.define_proxy(StepHandle, StepHandleType, ["world", "faults", "filt"])
+
+
+@njit(cache=True)
+def make_handle(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays) -> StepHandle:
+    """Hold the kernel's named tuples in a ``StepHandle`` (compiled, so the constructor is cached)."""
+    return StepHandle(w, fs, f)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _step_blocks(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArrays, trust: np.ndarray, score: bool,
+                 advance: np.ndarray) -> None:
+    """``step_episodes`` over the batch, threads over blocks of ``BLOCK`` episodes."""
     n_b = advance.shape[0]
     for block in prange((n_b + BLOCK - 1) // BLOCK):
         lo, hi = block_bounds(block, n_b)
         step_episodes(w, fs, f, trust, score, advance, lo, hi)
+
+
+@njit(cache=True, error_model="numpy")
+def core_step(h: StepHandle, trust: np.ndarray, score: bool, advance: np.ndarray, serial: bool) -> None:
+    """One step of every episode (``step_episodes`` over the batch).
+
+    Args:
+        h: the world inputs, fault schedule and filter arrays.
+        trust, score, advance: as in ``step_episodes``.
+        serial: run on the calling thread (a small batch: a parallel region costs more
+            than it saves); otherwise threads take blocks of episodes.
+    """
+    if serial:
+        step_episodes(h.world, h.faults, h.filt, trust, score, advance, 0, advance.shape[0])
+    else:
+        _step_blocks(h.world, h.faults, h.filt, trust, score, advance)

@@ -91,7 +91,7 @@ def normal_at(key: np.uint64, index: int) -> float:
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def student_t_at(key: np.uint64, index: int, dof: int) -> float:
     """Student-t draw with integer ``dof`` of stream ``key``: z / sqrt(χ²_dof / dof), χ² a sum of squares."""
     z = normal_at(key, index * 64)
@@ -114,7 +114,7 @@ def normal(seed: int, step: int, stream: int, index: int) -> float:
     return normal_at(stream_key(seed, step, stream), index)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def student_t(seed: int, step: int, stream: int, index: int, dof: int) -> float:
     """Student-t draw with integer ``dof``: z / sqrt(χ²_dof / dof), χ² as a sum of squares."""
     return student_t_at(stream_key(seed, step, stream), index, dof)

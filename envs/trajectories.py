@@ -70,7 +70,7 @@ def _waypoint(seed: int, uav: int, k: int, prm: np.ndarray, d: int) -> float:
     return prm[1 + d] + (prm[4 + d] - prm[1 + d]) * u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def truth_at(kind: int, prm: np.ndarray, t: float, seed: int, uav: int,
              p: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
     """Write the truth position, velocity and acceleration of one UAV at time ``t``.

@@ -125,6 +125,7 @@ class World:
         w = self.inputs
         self.buffers = SenseBuffers(pos=w.pos, vel=w.vel, imu=w.imu, z=w.z, valid=w.valid, label=w.label,
                                     injected=w.injected, velocity=w.velocity if w.has_velocity else None)
+        self._everyone = np.ones(n_b, dtype=np.bool_)
 
     @property
     def imu_const_bias(self) -> np.ndarray:
@@ -164,5 +165,5 @@ class World:
 
     def sense(self) -> SenseBuffers:
         """Advance every episode by one step and fill the step buffers."""
-        sense_batch(self.inputs, self.schedule)
+        sense_batch(self.inputs, self.schedule, self._everyone)
         return self.buffers

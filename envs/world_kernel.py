@@ -90,200 +90,14 @@ class WorldInputs(NamedTuple):
 
 
 @njit(cache=True, inline="always")
-def _in_window(windows: np.ndarray, b: int, wi: int, t: float) -> bool:
-    """Whether t lies in window wi of episode b: ``windows[b, wi] = [start, end)``."""
-    return windows[b, wi, 0] <= t < windows[b, wi, 1]
+def _inside(t: float, start: float, end: float) -> bool:
+    """t lies in the half-open window [start, end)."""
+    return start <= t < end
 
 
-@njit(cache=True, inline="always")
-def _imu_faulty(fs: FaultSchedule, b: int, j: int, t: float) -> bool:
-    """UAV j of episode b is inside one of its IMU-fault windows at time t."""
-    for wi in range(fs.imu_time.shape[1]):
-        if fs.imu_nodes[b, wi, j] and _in_window(fs.imu_time, b, wi, t):
-            return True
-    return False
-
-
-@njit(cache=True, inline="always")
-def _truth_and_imu(w: WorldInputs, fs: FaultSchedule, b: int, k: int, t: float) -> None:
-    """Truth at step k and the IMU reading u = Δv/dt + biases + noise (the mean acceleration over the interval)."""
-    key = stream_key(w.seeds[b], k, Stream.IMU)
-    for i in range(w.pos.shape[1]):
-        v_prev0, v_prev1, v_prev2 = w.vel[b, i, 0], w.vel[b, i, 1], w.vel[b, i, 2]
-        truth_at(w.traj_kind, w.traj_prm[i], t, w.seeds[b], i, w.pos[b, i], w.vel[b, i], w.acc[b, i])
-        for d in range(3):
-            v_prev = v_prev0 if d == 0 else (v_prev1 if d == 1 else v_prev2)
-            u = (w.vel[b, i, d] - v_prev) / w.dt + w.imu_const_bias[b, i, d]
-            for wi in range(fs.imu_time.shape[1]):
-                if fs.imu_nodes[b, wi, i] and _in_window(fs.imu_time, b, wi, t):
-                    u += fs.imu_bias[b, wi, d]
-            w.imu[b, i, d] = u + w.imu_sigma * normal_at(key, i * 3 + d)
-
-
-@njit(cache=True, inline="always")
-def _visual_odometry(w: WorldInputs, b: int, k: int) -> None:
-    """v_vo = v + b + σ n, n ~ N(0, 1) keyed by (seed, step, VELOCITY, uav·3 + axis)."""
-    key = stream_key(w.seeds[b], k, Stream.VELOCITY)
-    for i in range(w.vel.shape[1]):
-        for d in range(3):
-            w.velocity[b, i, d] = w.vel[b, i, d] + w.velocity_bias[b, i, d] + w.velocity_sigma * normal_at(key, i * 3 + d)
-
-
-@njit(cache=True, inline="always")
-def _range_error(w: WorldInputs, fs: FaultSchedule, b: int, i: int, l: int, idx: int, t: float,
-                 key_uniform: np.uint64, key_onset: np.uint64, key_process: np.uint64, p_on: float, phi: float,
-                 gm_step_sigma: float) -> float:
-    """Injected error of range channel (i, l): scheduled / uniform NLOS windows plus Gauss–Markov NLOS."""
-    err = 0.0
-    for wi in range(fs.bias_time.shape[1]):
-        if fs.bias_mask[b, wi, i, l] and _in_window(fs.bias_time, b, wi, t):
-            if fs.bias_param[b, wi, 0] == BIAS_UNIFORM:
-                u = uniform_at(key_uniform, idx * 8 + wi)
-                err += fs.bias_param[b, wi, 1] + (fs.bias_param[b, wi, 2] - fs.bias_param[b, wi, 1]) * u
-            else:
-                err += fs.bias_param[b, wi, 1]
-    if fs.gm_mask[i, l]:
-        g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
-        if w.gm_left[b, i, l] <= 0.0:
-            w.gm_bias[b, i, l] = 0.0
-            if uniform_at(key_onset, 2 * idx) < p_on:
-                u = uniform_at(key_onset, 2 * idx + 1)
-                w.gm_left[b, i, l] = max(1.0, -g[1] * math.log(u) / w.dt)
-                bb = g[2] + g[3] * normal_at(key_process, idx)
-                w.gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
-        else:
-            # b ← μ + φ(b − μ) + σ√(1−φ²)·n, φ = exp(−dt/τ)
-            bb = g[2] + phi * (w.gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, idx)
-            w.gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
-            w.gm_left[b, i, l] -= 1.0
-        if w.gm_left[b, i, l] > 0.0:
-            err += w.gm_bias[b, i, l]
-    return err
-
-
-@njit(cache=True, inline="always")
-def _gps(w: WorldInputs, fs: FaultSchedule, b: int, i: int, l: int, idx: int, t: float, key_gps: np.uint64,
-         key_mix: np.uint64) -> float:
-    """Write GPS fix (i, l) = p + drift + noise; returns the squared drift [m²]."""
-    sg = w.sigma[i, l]
-    drift2 = 0.0
-    for d in range(3):
-        drift = 0.0
-        for wi in range(fs.drift_time.shape[1]):
-            if fs.drift_nodes[b, wi, i] and t >= fs.drift_time[b, wi, 0]:
-                drift += fs.drift_rate[b, wi, d] * (min(t, fs.drift_time[b, wi, 1]) - fs.drift_time[b, wi, 0])
-        drift2 += drift * drift
-        if fs.hybrid_nodes[i]:
-            # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
-            h = fs.hybrid_param
-            ratio = h[0]
-            lo, hi = int(h[3]), int(h[4])
-            nu = lo + int(uniform_at(key_mix, idx * 3 + d) * (hi - lo + 1))
-            noise = ratio * h[1] * student_t_at(key_gps, idx * 3 + d, nu) \
-                + (1.0 - ratio) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
-        else:
-            noise = sg * normal_at(key_gps, idx * 3 + d)
-        w.z[b, i, l, d] = w.pos[b, i, d] + drift + noise
-    return drift2
-
-
-@njit(cache=True, inline="always")
-def sense_episode(w: WorldInputs, fs: FaultSchedule, b: int) -> None:
-    """Advance episode b by one step: truth, IMU, visual odometry and every channel with its faults."""
-    w.steps[b] += 1
-    k = w.steps[b]
-    t = k * w.dt
-    seed = w.seeds[b]
-    _truth_and_imu(w, fs, b, k, t)
-    if w.has_velocity:
-        _visual_odometry(w, b, k)
-    # one hash prefix per stream and step (rng.stream_key): each draw then costs one round
-    key_anchor = stream_key(seed, k, Stream.ANCHOR)
-    key_peer = stream_key(seed, k, Stream.PEER)
-    key_landmark = stream_key(seed, k, Stream.LANDMARK)
-    key_gps = stream_key(seed, k, Stream.GPS)
-    key_mix = stream_key(seed, k, Stream.HYBRID_MIX)
-    key_loss = stream_key(seed, k, Stream.PACKET_LOSS)
-    key_onset = stream_key(seed, k, Stream.NLOS_ONSET)
-    key_process = stream_key(seed, k, Stream.NLOS_PROCESS)
-    key_uniform = stream_key(seed, k, Stream.NLOS_UNIFORM)
-    # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
-    # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
-    p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
-    if fs.gm_param[4] > 0.0:
-        p_on = 1.0 - math.exp(-fs.gm_param[0] * w.dt)
-        phi = math.exp(-w.dt / fs.gm_param[4])
-        gm_step_sigma = fs.gm_param[3] * math.sqrt(1.0 - phi * phi)
-    n, n_l = w.z.shape[1], w.z.shape[2]
-    for i in range(n):
-        blind = False
-        for wi in range(fs.imu_time.shape[1]):
-            if fs.imu_drop[b, wi] and fs.imu_nodes[b, wi, i] and _in_window(fs.imu_time, b, wi, t):
-                blind = True
-        vision_out = False
-        for wi in range(fs.outage_time.shape[1]):
-            if fs.outage_nodes[b, wi, i] and _in_window(fs.outage_time, b, wi, t):
-                vision_out = True
-        for l in range(n_l):
-            ch = w.kind[i, l]
-            j = w.target[i, l]
-            idx = i * n_l + l
-            sg = w.sigma[i, l]
-            ok = w.linked[i, l]
-            err = 0.0
-            lab = False
-            if ch == ANCHOR or ch == PEER:
-                if ch == ANCHOR:
-                    dx = w.pos[b, i, 0] - w.anchors[j, 0]
-                    dy = w.pos[b, i, 1] - w.anchors[j, 1]
-                    dz = w.pos[b, i, 2] - w.anchors[j, 2]
-                else:
-                    dx = w.pos[b, i, 0] - w.pos[b, j, 0]
-                    dy = w.pos[b, i, 1] - w.pos[b, j, 1]
-                    dz = w.pos[b, i, 2] - w.pos[b, j, 2]
-                rng = math.sqrt(dx * dx + dy * dy + dz * dz)
-                if ch == PEER and rng > w.peer_range:
-                    ok = False
-                err = _range_error(w, fs, b, i, l, idx, t, key_uniform, key_onset, key_process, p_on, phi,
-                                   gm_step_sigma)
-                key = key_anchor if ch == ANCHOR else key_peer
-                w.z[b, i, l, 0] = rng + err + sg * normal_at(key, idx)
-                w.z[b, i, l, 1] = 0.0
-                w.z[b, i, l, 2] = 0.0
-                lab = err > LABEL_SIGMAS * sg
-                if ch == PEER:
-                    lab = lab or _imu_faulty(fs, b, j, t)
-            elif ch == LANDMARK:
-                dist2 = 0.0
-                for d in range(3):
-                    rel = w.landmarks[j, d] - w.pos[b, i, d]
-                    dist2 += rel * rel
-                    w.z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
-                if vision_out or dist2 > w.camera_range * w.camera_range:
-                    ok = False
-            elif ch == PEER_REL:
-                for d in range(3):
-                    w.z[b, i, l, d] = w.pos[b, j, d] - w.pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
-                lab = _imu_faulty(fs, b, j, t)
-            else:  # GPS
-                drift2 = _gps(w, fs, b, i, l, idx, t, key_gps, key_mix)
-                err = math.sqrt(drift2)
-                lab = drift2 > 0.0  # a drifting fix is faulty from the first centimetre
-            if blind:
-                ok = False
-            for wi in range(fs.uwb_time.shape[1]):
-                if fs.uwb_mask[b, wi, i, l] and _in_window(fs.uwb_time, b, wi, t):
-                    ok = False
-            if ok and fs.packet_loss > 0.0 and uniform_at(key_loss, idx) < fs.packet_loss:
-                ok = False
-            w.valid[b, i, l] = ok
-            w.label[b, i, l] = lab and ok
-            w.injected[b, i, l] = err
-
-
-#: episodes per parallel block. A prange body must not touch a named tuple's fields itself
-#: (numba 0.68 drops the writes, or refuses a nested tuple): each block calls a compiled
-#: function that loops over its episodes.
+#: episodes per parallel block. The prange body only calls a compiled function on its
+#: block: numba (0.68) loses writes made through a named tuple's fields directly in a
+#: prange body, and refuses nested tuples there.
 BLOCK = 16
 
 
@@ -293,23 +107,188 @@ def block_bounds(block: int, n: int) -> tuple[int, int]:
     return block * BLOCK, min((block + 1) * BLOCK, n)
 
 
-@njit(cache=True)
-def sense_episodes(w: WorldInputs, fs: FaultSchedule, lo: int, hi: int) -> None:
-    """Advance episodes lo..hi−1 by one step, on the calling thread."""
+# The kernel reads the named tuples' fields in place and passes helpers only arrays and
+# scalars: handing a named tuple of arrays to a helper (inlined or not) costs an atomic
+# reference count per field that numba cannot prune, per call. Division by zero cannot
+# occur (dt, τ > 0), and error_model="numpy" keeps exception paths, which also block that
+# pruning, out of the loop.
+@njit(cache=True, error_model="numpy")
+def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, hi: int) -> None:
+    """Advance the episodes b in [lo, hi) with ``go[b]`` by one step, on the calling thread.
+
+    Per episode: truth and IMU (u = Δv/dt + biases + noise, the mean acceleration over the
+    interval), visual odometry, then every channel with its faults.
+    """
+    n, n_l = w.z.shape[1], w.z.shape[2]
+    # truth_at writes into whole 3-vectors: views of the batch arrays would each cost a reference count
+    p, v, a = np.empty(3), np.empty(3), np.empty(3)
+    gm_bias, gm_left = w.gm_bias, w.gm_left
     for b in range(lo, hi):
-        sense_episode(w, fs, b)
+        if not go[b]:
+            continue
+        w.steps[b] += 1
+        k = w.steps[b]
+        t = k * w.dt
+        seed = w.seeds[b]
+        # one hash prefix per stream and step (rng.stream_key): each draw then costs one round
+        key_imu = stream_key(seed, k, Stream.IMU)
+        key_anchor = stream_key(seed, k, Stream.ANCHOR)
+        key_peer = stream_key(seed, k, Stream.PEER)
+        key_landmark = stream_key(seed, k, Stream.LANDMARK)
+        key_gps = stream_key(seed, k, Stream.GPS)
+        key_mix = stream_key(seed, k, Stream.HYBRID_MIX)
+        key_loss = stream_key(seed, k, Stream.PACKET_LOSS)
+        key_onset = stream_key(seed, k, Stream.NLOS_ONSET)
+        key_process = stream_key(seed, k, Stream.NLOS_PROCESS)
+        key_uniform = stream_key(seed, k, Stream.NLOS_UNIFORM)
+        key_vo = stream_key(seed, k, Stream.VELOCITY)
+
+        # ---- truth, IMU, visual odometry
+        for i in range(n):
+            truth_at(w.traj_kind, w.traj_prm[i], t, seed, i, p, v, a)
+            for d in range(3):
+                v_prev = w.vel[b, i, d]
+                w.pos[b, i, d], w.vel[b, i, d], w.acc[b, i, d] = p[d], v[d], a[d]
+                u = (w.vel[b, i, d] - v_prev) / w.dt + w.imu_const_bias[b, i, d]
+                for wi in range(fs.imu_time.shape[1]):
+                    if fs.imu_nodes[b, wi, i] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
+                        u += fs.imu_bias[b, wi, d]
+                w.imu[b, i, d] = u + w.imu_sigma * normal_at(key_imu, i * 3 + d)
+                if w.has_velocity:
+                    # v_vo = v + b + σ n
+                    w.velocity[b, i, d] = (w.vel[b, i, d] + w.velocity_bias[b, i, d]
+                                           + w.velocity_sigma * normal_at(key_vo, i * 3 + d))
+
+        # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
+        # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
+        g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
+        p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
+        if g[4] > 0.0:
+            p_on = 1.0 - math.exp(-g[0] * w.dt)
+            phi = math.exp(-w.dt / g[4])
+            gm_step_sigma = g[3] * math.sqrt(1.0 - phi * phi)
+
+        # ---- channels
+        for i in range(n):
+            blind = False
+            for wi in range(fs.imu_time.shape[1]):
+                if fs.imu_drop[b, wi] and fs.imu_nodes[b, wi, i] and _inside(t, fs.imu_time[b, wi, 0],
+                                                                             fs.imu_time[b, wi, 1]):
+                    blind = True
+            vision_out = False
+            for wi in range(fs.outage_time.shape[1]):
+                if fs.outage_nodes[b, wi, i] and _inside(t, fs.outage_time[b, wi, 0], fs.outage_time[b, wi, 1]):
+                    vision_out = True
+            for l in range(n_l):
+                ch = w.kind[i, l]
+                j = w.target[i, l]
+                idx = i * n_l + l
+                sg = w.sigma[i, l]
+                ok = w.linked[i, l]
+                err = 0.0
+                lab = False
+                if ch == ANCHOR or ch == PEER:
+                    if ch == ANCHOR:
+                        dx = w.pos[b, i, 0] - w.anchors[j, 0]
+                        dy = w.pos[b, i, 1] - w.anchors[j, 1]
+                        dz = w.pos[b, i, 2] - w.anchors[j, 2]
+                    else:
+                        dx = w.pos[b, i, 0] - w.pos[b, j, 0]
+                        dy = w.pos[b, i, 1] - w.pos[b, j, 1]
+                        dz = w.pos[b, i, 2] - w.pos[b, j, 2]
+                    rng = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    if ch == PEER and rng > w.peer_range:
+                        ok = False
+                    # scheduled / uniform NLOS windows
+                    for wi in range(fs.bias_time.shape[1]):
+                        if fs.bias_mask[b, wi, i, l] and _inside(t, fs.bias_time[b, wi, 0], fs.bias_time[b, wi, 1]):
+                            lo_b, hi_b = fs.bias_param[b, wi, 1], fs.bias_param[b, wi, 2]
+                            if fs.bias_param[b, wi, 0] == BIAS_UNIFORM:
+                                err += lo_b + (hi_b - lo_b) * uniform_at(key_uniform, idx * 8 + wi)
+                            else:
+                                err += lo_b
+                    # Gauss–Markov NLOS episodes
+                    if fs.gm_mask[i, l]:
+                        if gm_left[b, i, l] <= 0.0:
+                            gm_bias[b, i, l] = 0.0
+                            if uniform_at(key_onset, 2 * idx) < p_on:
+                                u = uniform_at(key_onset, 2 * idx + 1)
+                                gm_left[b, i, l] = max(1.0, -g[1] * math.log(u) / w.dt)
+                                bb = g[2] + g[3] * normal_at(key_process, idx)
+                                gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
+                        else:
+                            # b ← μ + φ(b − μ) + σ√(1−φ²)·n
+                            bb = g[2] + phi * (gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, idx)
+                            gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
+                            gm_left[b, i, l] -= 1.0
+                        if gm_left[b, i, l] > 0.0:
+                            err += gm_bias[b, i, l]
+                    w.z[b, i, l, 0] = rng + err + sg * normal_at(key_anchor if ch == ANCHOR else key_peer, idx)
+                    w.z[b, i, l, 1] = 0.0
+                    w.z[b, i, l, 2] = 0.0
+                    lab = err > LABEL_SIGMAS * sg
+                    if ch == PEER:
+                        # a range to a UAV inside its IMU fault is faulty
+                        for wi in range(fs.imu_time.shape[1]):
+                            if fs.imu_nodes[b, wi, j] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
+                                lab = True
+                elif ch == LANDMARK:
+                    dist2 = 0.0
+                    for d in range(3):
+                        rel = w.landmarks[j, d] - w.pos[b, i, d]
+                        dist2 += rel * rel
+                        w.z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
+                    if vision_out or dist2 > w.camera_range * w.camera_range:
+                        ok = False
+                elif ch == PEER_REL:
+                    for d in range(3):
+                        w.z[b, i, l, d] = w.pos[b, j, d] - w.pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
+                    for wi in range(fs.imu_time.shape[1]):
+                        if fs.imu_nodes[b, wi, j] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
+                            lab = True
+                else:  # GPS: p + drift + noise
+                    drift2 = 0.0
+                    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high]
+                    for d in range(3):
+                        drift = 0.0
+                        for wi in range(fs.drift_time.shape[1]):
+                            if fs.drift_nodes[b, wi, i] and t >= fs.drift_time[b, wi, 0]:
+                                drift += fs.drift_rate[b, wi, d] * (min(t, fs.drift_time[b, wi, 1])
+                                                                    - fs.drift_time[b, wi, 0])
+                        drift2 += drift * drift
+                        if fs.hybrid_nodes[i]:
+                            # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
+                            lo_nu, hi_nu = int(h[3]), int(h[4])
+                            nu = lo_nu + int(uniform_at(key_mix, idx * 3 + d) * (hi_nu - lo_nu + 1))
+                            noise = h[0] * h[1] * student_t_at(key_gps, idx * 3 + d, nu) \
+                                + (1.0 - h[0]) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
+                        else:
+                            noise = sg * normal_at(key_gps, idx * 3 + d)
+                        w.z[b, i, l, d] = w.pos[b, i, d] + drift + noise
+                    err = math.sqrt(drift2)
+                    lab = drift2 > 0.0  # a drifting fix is faulty from the first centimetre
+                if blind:
+                    ok = False
+                for wi in range(fs.uwb_time.shape[1]):
+                    if fs.uwb_mask[b, wi, i, l] and _inside(t, fs.uwb_time[b, wi, 0], fs.uwb_time[b, wi, 1]):
+                        ok = False
+                if ok and fs.packet_loss > 0.0 and uniform_at(key_loss, idx) < fs.packet_loss:
+                    ok = False
+                w.valid[b, i, l] = ok
+                w.label[b, i, l] = lab and ok
+                w.injected[b, i, l] = err
 
 
-@njit(cache=True, parallel=True)
-def sense_batch(w: WorldInputs, fs: FaultSchedule) -> None:
-    """Advance every episode by one step, threads over blocks of episodes."""
-    n_b = w.steps.shape[0]
+@njit(cache=True, parallel=True, error_model="numpy")
+def sense_batch(w: WorldInputs, fs: FaultSchedule, go: np.ndarray) -> None:
+    """Advance the episodes with ``go[b]`` by one step, threads over blocks of episodes."""
+    n_b = go.shape[0]
     for block in prange((n_b + BLOCK - 1) // BLOCK):
         lo, hi = block_bounds(block, n_b)
-        sense_episodes(w, fs, lo, hi)
+        sense_episodes(w, fs, go, lo, hi)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, velocity_bias_sigma: float,
                    init_pos_sigma: float, init_vel_sigma: float, x0: np.ndarray) -> None:
     """Start episodes ``idx`` at step 0 (their seeds and fault windows already set).
