@@ -23,6 +23,7 @@ from swarmloc.leaderboard.ranking import (
     Column,
     Standing,
     SuiteBoard,
+    best_ranked_on,
     column_score,
     family_columns,
     fmt,
@@ -80,6 +81,21 @@ def _column_cell(standing: Standing, column: Column) -> str:
     return _num_cell(cs.times, fmt_times(cs.times) + ("" if cs.covered == cs.total else "*"), tip)
 
 
+def _score_tip(board: SuiteBoard, standing: Standing) -> str | None:
+    """Hover text of a 2^S cell; for partial coverage, how the best ranked method does on the same tasks."""
+    score = standing.score
+    if score is None:
+        return "no score v1: no uniform_rmse in the results and no stored uniform entry for this suite"
+    tip = f"S = {score.S:.3f}, IQM of the gains {score.iqm:.3f}"
+    if standing.full or standing.entry.privileged:
+        return tip
+    best = best_ranked_on(board, score.tasks)
+    tip += f"; over its {len(score.tasks)} of {len(board.tasks)} tasks only"
+    if best is not None:
+        tip += f"; on those tasks the best ranked method, {best[0].entry.name}, has 2^S = {fmt_times(2.0 ** best[1])}"
+    return tip
+
+
 def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Sequence[Column], ranked: bool,
                 table_id: str) -> str:
     n = len(board.tasks)
@@ -119,7 +135,7 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
             f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a></td>",
             f"<td data-value=\"{_e(entry.track)}\">{_e(entry.track)}</td>",
             _num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
-                      None if score is None else f"S = {score.S:.3f}, IQM of the gains {score.iqm:.3f}"),
+                      _score_tip(board, standing)),
             _num_cell(low_high[0] if low_high else None,
                       "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
             _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),

@@ -198,6 +198,16 @@ def split_ranked(entries: Iterable[LeaderboardEntry]) -> tuple[list[LeaderboardE
     return [s.entry for s in board.ranked + board.partial], [s.entry for s in board.privileged]
 
 
+def best_ranked_on(board: SuiteBoard, tasks: Iterable[str]) -> tuple[Standing, float] | None:
+    """The ranked standing with the highest mean ``G_t`` over ``tasks``, and that mean (None if none is ranked).
+
+    How a partial-coverage method compares with the full-coverage ones on its own tasks.
+    """
+    tasks = list(tasks)
+    scored = [(s, float(np.mean([s.score.tasks[t].mean for t in tasks]))) for s in board.ranked if s.score and tasks]
+    return max(scored, key=lambda pair: pair[1]) if scored else None
+
+
 # -- columns ---------------------------------------------------------------------------
 
 
@@ -312,6 +322,7 @@ __all__ = [
     "Standing",
     "SuiteBoard",
     "SuiteKey",
+    "best_ranked_on",
     "by_suite",
     "column_score",
     "episodes_of",

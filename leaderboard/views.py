@@ -18,7 +18,6 @@ import contextlib
 import csv
 import io
 import json
-import re
 import sys
 from collections.abc import Iterator, Sequence
 from typing import Any, Literal
@@ -80,6 +79,20 @@ def open_store_or_refuse(db_url: str | None, console: Console | None = None) -> 
         yield store
 
 
+def _words(label: str) -> list[str]:
+    """``NLOSStep`` → NLOS, Step; ``HybridNoise10`` → Hybrid, Noise, 10 (CamelCase, acronyms, digits)."""
+    words: list[str] = []
+    for i, ch in enumerate(label):
+        prev, nxt = label[i - 1] if i else "", label[i + 1 : i + 2]
+        starts = bool(i) and ((ch.isupper() and (prev.islower() or prev.isdigit() or (prev.isupper() and nxt.islower())))
+                              or ch.isdigit() != prev.isdigit())
+        if starts or not words:
+            words.append(ch)
+        else:
+            words[-1] += ch
+    return words
+
+
 def stacked_header(label: str, width: int = HEADER_WIDTH) -> str:
     """A column header in lines of at most ``width`` characters, broken at CamelCase and digits.
 
@@ -88,9 +101,8 @@ def stacked_header(label: str, width: int = HEADER_WIDTH) -> str:
 
     A word longer than ``width`` keeps its own line whole.
     """
-    words = re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+|[^A-Za-z\d]+", label) or [label]
     lines: list[str] = []
-    for word in words:
+    for word in _words(label):
         if lines and len(lines[-1]) + len(word) <= width:
             lines[-1] += word
         else:

@@ -217,6 +217,8 @@ def test_site_has_v1_tables_and_suite_plots(store: LeaderboardStore, tmp_path: P
     for table in ("ranked-tiny-1", "partial-tiny-1", "privileged-tiny-1"):
         assert f'id="{table}"' in page
     assert "worst task: swarmloc/NLOS-v0" in page  # family cells name their worst task on hover
+    # a partial-coverage method is compared with the ranked ones on its own tasks
+    assert "over its 2 of 3 tasks only; on those tasks the best ranked method, half, has 2^S = 2.00" in page
     for name in ("score.png", "gain_heatmap.png", "profiles.png"):
         assert f'src="plots/suite-tiny-1/{name}"' in page
         assert (site / "plots" / "suite-tiny-1" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
