@@ -38,6 +38,7 @@ COMMANDS: CommandTable = {
     "methods": "swarmloc.bench.cli.methods",
     "evaluate": "swarmloc.bench.cli.evaluate",
     "plot": "swarmloc.bench.cli.plot",
+    "explain": "swarmloc.bench.cli.explain",
     "demo": "swarmloc.bench.cli.demo",
     "submit": "swarmloc.bench.cli.submit",
     "leaderboard": {
