@@ -1,0 +1,259 @@
+"""The information bound of each episode (``bound_rmse``), computed once per (task, seed).
+
+``episode_bounds(spec, seeds)`` returns one ``Bound`` per seed: the posterior Cramér–Rao
+bound of ``swarmloc.envs.bound`` reduced to the numbers a results file compares with its
+metrics, on exactly the steps and UAVs that ``EpisodeRecorder`` scores:
+
+* ``rmse``: the bound on the ``rmse`` metric (the task's scored UAVs, steps from
+  ``scoring.start``);
+* ``healthy_rmse``: the bound on the ``healthy_rmse`` metric where the task defines it (the
+  healthy UAVs over the fault window: CascadedFault, CascadedFaultRandom), else None.
+
+A task where the bound is not defined (a recorded flight, an anchor-free swarm) gets None
+and the reason. ``suite_bounds(suite)`` does every episode of a suite.
+
+Caching: per process, and in a JSON file per task spec under the user cache folder
+(``platformdirs.user_cache_dir("swarmloc")/bounds``, or ``$SWARMLOC_CACHE/bounds``), keyed by
+the SHA-256 of ``spec.model_dump_json()``, the seed, ``BOUND_VERSION`` and the label
+threshold k; the files are written atomically and merged, so concurrent writers lose at most
+some entries, which are then computed again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarmloc.bench.common.files import write_text_atomic
+from swarmloc.bench.evaluation import metrics as M
+from swarmloc.envs.bound import (
+    BOUND_LABEL_SIGMAS,
+    BOUND_VERSION,
+    bound_rmse,
+    pcrlb,
+    record_inputs,
+    unsupported_reason,
+)
+from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.tasks import get_spec
+
+#: environment variable naming the folder for swarmloc's caches (default: the user cache folder)
+CACHE_ENV = "SWARMLOC_CACHE"
+#: the metrics a ``Bound`` bounds
+BOUNDED_METRICS = ("rmse", "healthy_rmse")
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The information bound of one episode.
+
+    Attributes:
+        task: task ID; seed: episode seed.
+        rmse: lower bound on the episode's ``rmse`` metric [m]; None where not defined.
+        healthy_rmse: lower bound on its ``healthy_rmse`` metric [m]; None where the task does
+            not define that metric or the bound is not defined.
+        reason: why ``rmse`` is None (None when it has a value).
+    """
+
+    task: str
+    seed: int
+    rmse: float | None
+    healthy_rmse: float | None
+    reason: str | None
+
+    def for_metric(self, metric: str) -> float | None:
+        """The bound on ``metric`` (``rmse`` or ``healthy_rmse``)."""
+        if metric not in BOUNDED_METRICS:
+            raise ValueError(f"no bound for metric {metric!r}; bounded metrics: {', '.join(BOUNDED_METRICS)}")
+        return getattr(self, metric)
+
+
+# --------------------------------------------------------------------------- scored steps and UAVs
+
+
+def scored_selection(spec: TaskSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Steps ``(T,)`` and UAVs ``(N,)`` the ``rmse`` metric scores (``EpisodeRecorder``'s choice).
+
+    Update k (0-based) is at time (k + 1)·dt; it is scored from ``scoring.start`` on.
+    """
+    times = spec.dt * np.arange(1, spec.n_steps + 1)
+    steps = times >= spec.scoring.start - 1e-9
+    nodes = np.zeros(spec.n_uav, dtype=bool)
+    nodes[list(spec.scored_nodes)] = True
+    return steps, nodes
+
+
+def healthy_selection(spec: TaskSpec, schedule, b: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """UAVs ``(N,)`` and steps ``(T,)`` the ``healthy_rmse`` metric scores in episode b, or None.
+
+    The same rule as ``EpisodeRecorder``: the spec's healthy nodes over its fault window (or
+    over the episode's IMU-fault span), or, for a randomised cascade, the nodes without an
+    IMU fault over the fault span.
+    """
+    times = spec.dt * np.arange(1, spec.n_steps + 1)
+    steps_ok, _ = scored_selection(spec)
+    s = spec.scoring
+    if s.healthy_nodes:
+        healthy = np.zeros(spec.n_uav, dtype=bool)
+        healthy[list(s.healthy_nodes)] = True
+        if s.fault_window is not None:
+            return healthy, M.window_steps(times, s.fault_window) & steps_ok
+        span = schedule.imu_fault_span()[b] if schedule is not None else np.full(2, np.nan)
+        window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
+        return healthy, (M.window_steps(times, window) if window else steps_ok) & steps_ok
+    if spec.faults.imu_cascade_random is not None and schedule is not None:
+        span = schedule.imu_fault_span()[b]
+        return ~schedule.faulty_nodes[b], M.window_steps(times, (float(span[0]), float(span[1]))) & steps_ok
+    return None
+
+
+# --------------------------------------------------------------------------- computing
+
+
+def compute_bounds(spec: TaskSpec, seeds: Sequence[int], label_sigmas: float = BOUND_LABEL_SIGMAS) -> list[Bound]:
+    """The bounds of some episodes of one task, computed now (no cache).
+
+    Args:
+        spec: the task.
+        seeds: episode seeds.
+        label_sigmas: k: a channel-step with an injected error above k·σ is left out.
+
+    Returns:
+        One ``Bound`` per seed, in order.
+    """
+    seeds = [int(s) for s in seeds]
+    why = unsupported_reason(spec)
+    if why is not None:
+        return [Bound(spec.task_id, s, None, None, why) for s in seeds]
+    inputs, world = record_inputs(spec, seeds, label_sigmas)
+    out = pcrlb(inputs)
+    steps, nodes = scored_selection(spec)
+    bounds = []
+    for b, seed in enumerate(seeds):
+        k = int(out.failed_at[b])
+        if k >= 0:
+            reason = (f"the information matrix of {spec.task_id} seed {seed} is not positive definite numerically "
+                      f"at step {k + 1} (t = {(k + 1) * spec.dt:g} s): no finite bound")
+            bounds.append(Bound(spec.task_id, seed, None, None, reason))
+            continue
+        pos_var = out.pos_var[:, b]
+        healthy = healthy_selection(spec, getattr(world, "schedule", None), b)
+        healthy_value = None
+        if healthy is not None and healthy[0].any() and healthy[1].any():
+            healthy_value = bound_rmse(pos_var, healthy[1], healthy[0])
+        bounds.append(Bound(spec.task_id, seed, bound_rmse(pos_var, steps, nodes), healthy_value, None))
+    return bounds
+
+
+# --------------------------------------------------------------------------- caching
+
+_MEMORY: dict[tuple[str, int, int, float], Bound] = {}
+
+
+def cache_folder() -> Path:
+    """Folder of the persistent bound cache (``$SWARMLOC_CACHE/bounds`` or the user cache folder)."""
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        from platformdirs import user_cache_dir
+
+        root = user_cache_dir("swarmloc")
+    return Path(root) / "bounds"
+
+
+def spec_sha256(spec: TaskSpec) -> str:
+    """SHA-256 (hex) of ``spec.model_dump_json()``: the task part of the cache key."""
+    return hashlib.sha256(spec.model_dump_json().encode()).hexdigest()
+
+
+def _cache_file(spec_key: str, label_sigmas: float) -> Path:
+    return cache_folder() / f"v{BOUND_VERSION}-k{float(label_sigmas)!r}" / f"{spec_key}.json"
+
+
+def _read_cache(path: Path) -> dict[str, dict]:
+    """The cached bounds of one file (seed text → fields); empty when absent or unreadable."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return dict(data["bounds"]) if data.get("bound_version") == BOUND_VERSION else {}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def _write_cache(path: Path, spec: TaskSpec, label_sigmas: float, new: list[Bound]) -> None:
+    """Merge ``new`` into the cache file (atomically); a cache that cannot be written is skipped."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        entries = _read_cache(path)
+        for bound in new:
+            entries[str(bound.seed)] = {k: v for k, v in asdict(bound).items() if k not in ("task", "seed")}
+        data = {"bound_version": BOUND_VERSION, "label_sigmas": float(label_sigmas), "task": spec.task_id,
+                "spec_sha256": spec_sha256(spec), "bounds": entries}
+        write_text_atomic(path, json.dumps(data, sort_keys=True))
+    except OSError:
+        pass
+
+
+def episode_bounds(spec: TaskSpec | str, seeds: Sequence[int], *, label_sigmas: float = BOUND_LABEL_SIGMAS,
+                   persistent: bool = True) -> list[Bound]:
+    """The bounds of some episodes of one task, from the caches where they are, else computed.
+
+    Args:
+        spec: the task (or its ID).
+        seeds: episode seeds.
+        label_sigmas: k of the bound's labels (``envs.bound.BOUND_LABEL_SIGMAS``).
+        persistent: also read and write the cache file (the per-process cache is always used).
+
+    Returns:
+        One ``Bound`` per seed, in order.
+    """
+    spec = get_spec(spec) if isinstance(spec, str) else spec
+    key = spec_sha256(spec)
+    seeds = [int(s) for s in seeds]
+    path = _cache_file(key, label_sigmas)
+    stored = _read_cache(path) if persistent else {}
+    found: dict[int, Bound] = {}
+    for seed in seeds:
+        mem = _MEMORY.get((key, seed, BOUND_VERSION, float(label_sigmas)))
+        if mem is not None:
+            found[seed] = mem
+        elif str(seed) in stored:
+            e = stored[str(seed)]
+            found[seed] = Bound(spec.task_id, seed, e.get("rmse"), e.get("healthy_rmse"), e.get("reason"))
+    missing = list(dict.fromkeys(s for s in seeds if s not in found))
+    if missing:
+        computed = compute_bounds(spec, missing, label_sigmas)
+        found.update({b.seed: b for b in computed})
+        if persistent:
+            _write_cache(path, spec, label_sigmas, computed)
+    for seed, bound in found.items():
+        _MEMORY[(key, seed, BOUND_VERSION, float(label_sigmas))] = bound
+    return [found[s] for s in seeds]
+
+
+def suite_bounds(suite, *, label_sigmas: float = BOUND_LABEL_SIGMAS,
+                 persistent: bool = True) -> dict[tuple[str, int], Bound]:
+    """The bound of every episode of a suite (one batch per task).
+
+    Args:
+        suite: a ``swarmloc.bench.evaluation.suites.Suite``.
+        label_sigmas, persistent: as in ``episode_bounds``.
+
+    Returns:
+        ``(task ID, seed) → Bound`` for every episode of the suite.
+    """
+    out: dict[tuple[str, int], Bound] = {}
+    for task in suite.tasks:
+        for bound in episode_bounds(get_spec(task), suite.seeds(task), label_sigmas=label_sigmas,
+                                    persistent=persistent):
+            out[(task, bound.seed)] = bound
+    return out
+
+
+def clear_memory_cache() -> None:
+    """Forget the bounds cached in this process (the cache files stay)."""
+    _MEMORY.clear()
