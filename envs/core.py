@@ -19,12 +19,8 @@ from . import cekf
 from .core_kernel import FilterArrays, core_step, make_handle
 from .specs import TaskSpec
 from .world import World
+from .world_kernel import SERIAL_BELOW  # noqa: F401  (the speed benchmark runs small batches as the core does)
 from .worlds import AnyWorld, make_world
-
-#: below this batch size the step kernel runs on the calling thread: a parallel region over
-#: a handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
-#: spin-wait for their turn can make one step take tens of milliseconds
-SERIAL_BELOW = 32
 
 
 @dataclass
@@ -122,7 +118,6 @@ class LinkTrustCore:
         self._senses = isinstance(w, World)
         self._handle = make_handle(w.inputs, w.schedule, self._filter) if self._senses else None
         self._filter_only = make_handle(None, None, self._filter)
-        self._serial = self.batch_size < SERIAL_BELOW
         self._everyone = np.ones(self.batch_size, dtype=bool)
 
     def _advance(self, mask: np.ndarray | None = None, trust: np.ndarray | None = None) -> None:
@@ -134,11 +129,11 @@ class LinkTrustCore:
         go = self._everyone if mask is None else mask
         score = trust is not None
         if self._senses:
-            core_step(self._handle, trust if score else self._out.applied, score, go, self._serial)
+            core_step(self._handle, trust if score else self._out.applied, score, go)
             return
         w, f = self.world, self._filter
         if score:
-            core_step(self._filter_only, trust, True, ~self._everyone, self._serial)
+            core_step(self._filter_only, trust, True, ~self._everyone)
             go = go & ~f.done
         keep = ~go
         saved = [a[keep].copy() for a in self._world_state()] if keep.any() else []
@@ -146,7 +141,7 @@ class LinkTrustCore:
         w.sense()
         for array, value in zip(self._world_state(), saved):
             array[keep] = value
-        core_step(self._filter_only, self._out.applied, False, go, self._serial)
+        core_step(self._filter_only, self._out.applied, False, go)
 
     # ------------------------------------------------------------------ API
     def reset(self, seeds: np.ndarray | list[int], mask: np.ndarray | None = None) -> CoreStep:

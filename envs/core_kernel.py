@@ -32,7 +32,7 @@ from numba.experimental import structref
 
 from .cekf import features_uav, predict_uav, update_uav
 from .faults import FaultSchedule
-from .world_kernel import BLOCK, WorldInputs, block_bounds, sense_episodes
+from .world_kernel import BLOCK, SERIAL_BELOW, WorldInputs, block_bounds, sense_episodes
 
 
 class FilterArrays(NamedTuple):
@@ -217,16 +217,15 @@ def _step_blocks(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArray
 
 
 @njit(cache=True, error_model="numpy")
-def core_step(h: StepHandle, trust: np.ndarray, score: bool, advance: np.ndarray, serial: bool) -> None:
-    """One step of every episode (``step_episodes`` over the batch).
+def core_step(h: StepHandle, trust: np.ndarray, score: bool, advance: np.ndarray) -> None:
+    """One step of every episode (``step_episodes`` over the batch; threads over blocks of
+    episodes from ``SERIAL_BELOW`` episodes on).
 
     Args:
         h: the world inputs, fault schedule and filter arrays.
         trust, score, advance: as in ``step_episodes``.
-        serial: run on the calling thread (a small batch: a parallel region costs more
-            than it saves); otherwise threads take blocks of episodes.
     """
-    if serial:
+    if advance.shape[0] < SERIAL_BELOW:
         step_episodes(h.world, h.faults, h.filt, trust, score, advance, 0, advance.shape[0])
     else:
         _step_blocks(h.world, h.faults, h.filt, trust, score, advance)

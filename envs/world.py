@@ -110,7 +110,8 @@ class World:
         self.schedule: FaultSchedule = build_schedule(spec, self.layout, self.seeds)
         self.x0 = np.zeros((n_b, n, 6))
         s, lay = spec.sensors, self.layout
-        vec, chan = lambda: np.zeros((n_b, n, 3)), lambda dt=np.float64: np.zeros((n_b, n, n_l), dtype=dt)  # noqa: E731
+        per_uav = lambda: np.zeros((n_b, n, 3))  # noqa: E731
+        per_channel = lambda dtype=np.float64: np.zeros((n_b, n, n_l), dtype=dtype)  # noqa: E731
         self.inputs = WorldInputs(
             dt=float(spec.dt), traj_kind=trajectory_kind(spec),
             traj_prm=np.ascontiguousarray(trajectory_params(spec)).reshape(n, N_PARAMS),
@@ -118,9 +119,9 @@ class World:
             sigma=lay.sigma, imu_sigma=float(s.imu_sigma), camera_range=float(s.camera_max_range),
             peer_range=float(s.peers.max_range), has_velocity=s.velocity_sigma is not None,
             velocity_sigma=float(s.velocity_sigma or 0.0), seeds=self.seeds, steps=self.steps,
-            imu_const_bias=vec(), velocity_bias=vec(), gm_bias=chan(), gm_left=chan(),
-            pos=vec(), vel=vec(), acc=vec(), imu=vec(), z=np.zeros((n_b, n, n_l, 3)), valid=chan(np.bool_),
-            label=chan(np.bool_), injected=chan(), velocity=vec(),
+            imu_const_bias=per_uav(), velocity_bias=per_uav(), gm_bias=per_channel(), gm_left=per_channel(),
+            pos=per_uav(), vel=per_uav(), acc=per_uav(), imu=per_uav(), z=np.zeros((n_b, n, n_l, 3)),
+            valid=per_channel(np.bool_), label=per_channel(np.bool_), injected=per_channel(), velocity=per_uav(),
         )
         w = self.inputs
         self.buffers = SenseBuffers(pos=w.pos, vel=w.vel, imu=w.imu, z=w.z, valid=w.valid, label=w.label,

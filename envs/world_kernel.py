@@ -95,6 +95,20 @@ def _inside(t: float, start: float, end: float) -> bool:
     return start <= t < end
 
 
+@njit(cache=True, inline="always")
+def _imu_faulty(imu_time: np.ndarray, imu_nodes: np.ndarray, b: int, j: int, t: float) -> bool:
+    """UAV j of episode b is inside one of its IMU-fault windows at time t."""
+    for wi in range(imu_time.shape[1]):
+        if imu_nodes[b, wi, j] and _inside(t, imu_time[b, wi, 0], imu_time[b, wi, 1]):
+            return True
+    return False
+
+
+#: below this batch size the kernels run on the calling thread: a parallel region over a
+#: handful of episodes costs more than it saves, and on a busy machine OpenMP workers that
+#: spin-wait for their turn can make one step take tens of milliseconds
+SERIAL_BELOW = 32
+
 #: episodes per parallel block. The prange body only calls a compiled function on its
 #: block: numba (0.68) loses writes made through a named tuple's fields directly in a
 #: prange body, and refuses nested tuples there.
@@ -107,11 +121,10 @@ def block_bounds(block: int, n: int) -> tuple[int, int]:
     return block * BLOCK, min((block + 1) * BLOCK, n)
 
 
-# The kernel reads the named tuples' fields in place and passes helpers only arrays and
-# scalars: handing a named tuple of arrays to a helper (inlined or not) costs an atomic
-# reference count per field that numba cannot prune, per call. Division by zero cannot
-# occur (dt, τ > 0), and error_model="numpy" keeps exception paths, which also block that
-# pruning, out of the loop.
+# The kernel passes helpers only arrays and scalars: handing a named tuple of arrays to a
+# helper (inlined or not) costs an atomic reference count per field and call, which numba
+# cannot prune. Division by zero cannot occur (dt, τ > 0); error_model="numpy" keeps
+# exception paths, which also block that pruning, out of the loop.
 @njit(cache=True, error_model="numpy")
 def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, hi: int) -> None:
     """Advance the episodes b in [lo, hi) with ``go[b]`` by one step, on the calling thread.
@@ -119,17 +132,31 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     Per episode: truth and IMU (u = Δv/dt + biases + noise, the mean acceleration over the
     interval), visual odometry, then every channel with its faults.
     """
-    n, n_l = w.z.shape[1], w.z.shape[2]
-    # truth_at writes into whole 3-vectors: views of the batch arrays would each cost a reference count
+    # The arrays are bound once: numba reference-counts every array read from a named tuple,
+    # with an atomic operation, and keeps the pair when the read sits in a branch.
+    pos, vel, acc, imu, z, velocity = w.pos, w.vel, w.acc, w.imu, w.z, w.velocity
+    valid, label, injected = w.valid, w.label, w.injected
+    anchors, landmarks, traj_prm = w.anchors, w.landmarks, w.traj_prm
+    kind, target, linked, sigma = w.kind, w.target, w.linked, w.sigma
+    seeds, steps, imu_const_bias, velocity_bias, gm_bias, gm_left = (w.seeds, w.steps, w.imu_const_bias,
+                                                                      w.velocity_bias, w.gm_bias, w.gm_left)
+    bias_time, bias_param, bias_mask = fs.bias_time, fs.bias_param, fs.bias_mask
+    imu_time, imu_bias, imu_nodes, imu_drop = fs.imu_time, fs.imu_bias, fs.imu_nodes, fs.imu_drop
+    outage_time, outage_nodes, uwb_time, uwb_mask = fs.outage_time, fs.outage_nodes, fs.uwb_time, fs.uwb_mask
+    drift_time, drift_rate, drift_nodes = fs.drift_time, fs.drift_rate, fs.drift_nodes
+    gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
+    g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
+    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high]
+    n, n_l = z.shape[1], z.shape[2]
+    # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
     p, v, a = np.empty(3), np.empty(3), np.empty(3)
-    gm_bias, gm_left = w.gm_bias, w.gm_left
     for b in range(lo, hi):
         if not go[b]:
             continue
-        w.steps[b] += 1
-        k = w.steps[b]
+        steps[b] += 1
+        k = steps[b]
         t = k * w.dt
-        seed = w.seeds[b]
+        seed = seeds[b]
         # one hash prefix per stream and step (rng.stream_key): each draw then costs one round
         key_imu = stream_key(seed, k, Stream.IMU)
         key_anchor = stream_key(seed, k, Stream.ANCHOR)
@@ -145,23 +172,22 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
 
         # ---- truth, IMU, visual odometry
         for i in range(n):
-            truth_at(w.traj_kind, w.traj_prm[i], t, seed, i, p, v, a)
+            truth_at(w.traj_kind, traj_prm[i], t, seed, i, p, v, a)
             for d in range(3):
-                v_prev = w.vel[b, i, d]
-                w.pos[b, i, d], w.vel[b, i, d], w.acc[b, i, d] = p[d], v[d], a[d]
-                u = (w.vel[b, i, d] - v_prev) / w.dt + w.imu_const_bias[b, i, d]
-                for wi in range(fs.imu_time.shape[1]):
-                    if fs.imu_nodes[b, wi, i] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
-                        u += fs.imu_bias[b, wi, d]
-                w.imu[b, i, d] = u + w.imu_sigma * normal_at(key_imu, i * 3 + d)
+                v_prev = vel[b, i, d]
+                pos[b, i, d], vel[b, i, d], acc[b, i, d] = p[d], v[d], a[d]
+                u = (vel[b, i, d] - v_prev) / w.dt + imu_const_bias[b, i, d]
+                for wi in range(imu_time.shape[1]):
+                    if imu_nodes[b, wi, i] and _inside(t, imu_time[b, wi, 0], imu_time[b, wi, 1]):
+                        u += imu_bias[b, wi, d]
+                imu[b, i, d] = u + w.imu_sigma * normal_at(key_imu, i * 3 + d)
                 if w.has_velocity:
                     # v_vo = v + b + σ n
-                    w.velocity[b, i, d] = (w.vel[b, i, d] + w.velocity_bias[b, i, d]
-                                           + w.velocity_sigma * normal_at(key_vo, i * 3 + d))
+                    velocity[b, i, d] = (vel[b, i, d] + velocity_bias[b, i, d]
+                                         + w.velocity_sigma * normal_at(key_vo, i * 3 + d))
 
         # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
         # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
-        g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
         p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
         if g[4] > 0.0:
             p_on = 1.0 - math.exp(-g[0] * w.dt)
@@ -170,45 +196,45 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
 
         # ---- channels
         for i in range(n):
+            # a UAV inside an IMU fault that drops it hears nothing
             blind = False
-            for wi in range(fs.imu_time.shape[1]):
-                if fs.imu_drop[b, wi] and fs.imu_nodes[b, wi, i] and _inside(t, fs.imu_time[b, wi, 0],
-                                                                             fs.imu_time[b, wi, 1]):
+            for wi in range(imu_time.shape[1]):
+                if imu_drop[b, wi] and imu_nodes[b, wi, i] and _inside(t, imu_time[b, wi, 0], imu_time[b, wi, 1]):
                     blind = True
             vision_out = False
-            for wi in range(fs.outage_time.shape[1]):
-                if fs.outage_nodes[b, wi, i] and _inside(t, fs.outage_time[b, wi, 0], fs.outage_time[b, wi, 1]):
+            for wi in range(outage_time.shape[1]):
+                if outage_nodes[b, wi, i] and _inside(t, outage_time[b, wi, 0], outage_time[b, wi, 1]):
                     vision_out = True
             for l in range(n_l):
-                ch = w.kind[i, l]
-                j = w.target[i, l]
+                ch = kind[i, l]
+                j = target[i, l]
                 idx = i * n_l + l
-                sg = w.sigma[i, l]
-                ok = w.linked[i, l]
+                sg = sigma[i, l]
+                ok = linked[i, l]
                 err = 0.0
                 lab = False
                 if ch == ANCHOR or ch == PEER:
                     if ch == ANCHOR:
-                        dx = w.pos[b, i, 0] - w.anchors[j, 0]
-                        dy = w.pos[b, i, 1] - w.anchors[j, 1]
-                        dz = w.pos[b, i, 2] - w.anchors[j, 2]
+                        dx = pos[b, i, 0] - anchors[j, 0]
+                        dy = pos[b, i, 1] - anchors[j, 1]
+                        dz = pos[b, i, 2] - anchors[j, 2]
                     else:
-                        dx = w.pos[b, i, 0] - w.pos[b, j, 0]
-                        dy = w.pos[b, i, 1] - w.pos[b, j, 1]
-                        dz = w.pos[b, i, 2] - w.pos[b, j, 2]
+                        dx = pos[b, i, 0] - pos[b, j, 0]
+                        dy = pos[b, i, 1] - pos[b, j, 1]
+                        dz = pos[b, i, 2] - pos[b, j, 2]
                     rng = math.sqrt(dx * dx + dy * dy + dz * dz)
                     if ch == PEER and rng > w.peer_range:
                         ok = False
                     # scheduled / uniform NLOS windows
-                    for wi in range(fs.bias_time.shape[1]):
-                        if fs.bias_mask[b, wi, i, l] and _inside(t, fs.bias_time[b, wi, 0], fs.bias_time[b, wi, 1]):
-                            lo_b, hi_b = fs.bias_param[b, wi, 1], fs.bias_param[b, wi, 2]
-                            if fs.bias_param[b, wi, 0] == BIAS_UNIFORM:
+                    for wi in range(bias_time.shape[1]):
+                        if bias_mask[b, wi, i, l] and _inside(t, bias_time[b, wi, 0], bias_time[b, wi, 1]):
+                            lo_b, hi_b = bias_param[b, wi, 1], bias_param[b, wi, 2]
+                            if bias_param[b, wi, 0] == BIAS_UNIFORM:
                                 err += lo_b + (hi_b - lo_b) * uniform_at(key_uniform, idx * 8 + wi)
                             else:
                                 err += lo_b
                     # Gauss–Markov NLOS episodes
-                    if fs.gm_mask[i, l]:
+                    if gm_mask[i, l]:
                         if gm_left[b, i, l] <= 0.0:
                             gm_bias[b, i, l] = 0.0
                             if uniform_at(key_onset, 2 * idx) < p_on:
@@ -223,40 +249,33 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             gm_left[b, i, l] -= 1.0
                         if gm_left[b, i, l] > 0.0:
                             err += gm_bias[b, i, l]
-                    w.z[b, i, l, 0] = rng + err + sg * normal_at(key_anchor if ch == ANCHOR else key_peer, idx)
-                    w.z[b, i, l, 1] = 0.0
-                    w.z[b, i, l, 2] = 0.0
+                    z[b, i, l, 0] = rng + err + sg * normal_at(key_anchor if ch == ANCHOR else key_peer, idx)
+                    z[b, i, l, 1] = 0.0
+                    z[b, i, l, 2] = 0.0
                     lab = err > LABEL_SIGMAS * sg
                     if ch == PEER:
-                        # a range to a UAV inside its IMU fault is faulty
-                        for wi in range(fs.imu_time.shape[1]):
-                            if fs.imu_nodes[b, wi, j] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
-                                lab = True
+                        lab = lab or _imu_faulty(imu_time, imu_nodes, b, j, t)
                 elif ch == LANDMARK:
                     dist2 = 0.0
                     for d in range(3):
-                        rel = w.landmarks[j, d] - w.pos[b, i, d]
+                        rel = landmarks[j, d] - pos[b, i, d]
                         dist2 += rel * rel
-                        w.z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
+                        z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
                     if vision_out or dist2 > w.camera_range * w.camera_range:
                         ok = False
                 elif ch == PEER_REL:
                     for d in range(3):
-                        w.z[b, i, l, d] = w.pos[b, j, d] - w.pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
-                    for wi in range(fs.imu_time.shape[1]):
-                        if fs.imu_nodes[b, wi, j] and _inside(t, fs.imu_time[b, wi, 0], fs.imu_time[b, wi, 1]):
-                            lab = True
+                        z[b, i, l, d] = pos[b, j, d] - pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
+                    lab = _imu_faulty(imu_time, imu_nodes, b, j, t)
                 else:  # GPS: p + drift + noise
                     drift2 = 0.0
-                    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high]
                     for d in range(3):
                         drift = 0.0
-                        for wi in range(fs.drift_time.shape[1]):
-                            if fs.drift_nodes[b, wi, i] and t >= fs.drift_time[b, wi, 0]:
-                                drift += fs.drift_rate[b, wi, d] * (min(t, fs.drift_time[b, wi, 1])
-                                                                    - fs.drift_time[b, wi, 0])
+                        for wi in range(drift_time.shape[1]):
+                            if drift_nodes[b, wi, i] and t >= drift_time[b, wi, 0]:
+                                drift += drift_rate[b, wi, d] * (min(t, drift_time[b, wi, 1]) - drift_time[b, wi, 0])
                         drift2 += drift * drift
-                        if fs.hybrid_nodes[i]:
+                        if hybrid_nodes[i]:
                             # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
                             lo_nu, hi_nu = int(h[3]), int(h[4])
                             nu = lo_nu + int(uniform_at(key_mix, idx * 3 + d) * (hi_nu - lo_nu + 1))
@@ -264,25 +283,28 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                                 + (1.0 - h[0]) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
                         else:
                             noise = sg * normal_at(key_gps, idx * 3 + d)
-                        w.z[b, i, l, d] = w.pos[b, i, d] + drift + noise
+                        z[b, i, l, d] = pos[b, i, d] + drift + noise
                     err = math.sqrt(drift2)
                     lab = drift2 > 0.0  # a drifting fix is faulty from the first centimetre
                 if blind:
                     ok = False
-                for wi in range(fs.uwb_time.shape[1]):
-                    if fs.uwb_mask[b, wi, i, l] and _inside(t, fs.uwb_time[b, wi, 0], fs.uwb_time[b, wi, 1]):
+                for wi in range(uwb_time.shape[1]):
+                    if uwb_mask[b, wi, i, l] and _inside(t, uwb_time[b, wi, 0], uwb_time[b, wi, 1]):
                         ok = False
                 if ok and fs.packet_loss > 0.0 and uniform_at(key_loss, idx) < fs.packet_loss:
                     ok = False
-                w.valid[b, i, l] = ok
-                w.label[b, i, l] = lab and ok
-                w.injected[b, i, l] = err
+                valid[b, i, l] = ok
+                label[b, i, l] = lab and ok
+                injected[b, i, l] = err
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def sense_batch(w: WorldInputs, fs: FaultSchedule, go: np.ndarray) -> None:
     """Advance the episodes with ``go[b]`` by one step, threads over blocks of episodes."""
     n_b = go.shape[0]
+    if n_b < SERIAL_BELOW:
+        sense_episodes(w, fs, go, 0, n_b)
+        return
     for block in prange((n_b + BLOCK - 1) // BLOCK):
         lo, hi = block_bounds(block, n_b)
         sense_episodes(w, fs, go, lo, hi)

@@ -3,9 +3,9 @@
 Rows (``impl``): ``filterpy`` (FilterPy's ExtendedKalmanFilter, one UAV at a time),
 ``reference`` (our pure-numpy float64 CEKF), ``kernel`` (our fused numba CEKF, whole
 sequences per call) at B = 1, 64, 1024, 4096 on the same recorded measurements (Ideal-v0
-world, one UAV per episode, six anchors), and ``world`` (the full link-trust step: truth,
-sensors, faults, prediction, features, update) for Scale6-v0 at the same B. Other
-modules add their own rows through ``EXTRA_ROWS``. Ratios are to FilterPy.
+world, one UAV per episode, six anchors). Other modules add their own rows through
+``EXTRA_ROWS``, first ``world`` and ``world-unfused`` (the full link-trust step on
+Scale6-v0 at the same B, ``speed/world.py``). Ratios are to FilterPy.
 
 Usage: ``swarmloc bench speed [--json PATH] [--quick]`` (or ``python -m swarmloc.bench.speed``).
 """
@@ -27,13 +27,14 @@ import numpy as np
 from swarmloc.bench.common.files import write_text_atomic
 from swarmloc.envs import cekf
 from swarmloc.envs.cekf_reference import run_reference
-from swarmloc.envs.core import SERIAL_BELOW, LinkTrustCore
+from swarmloc.envs.core import SERIAL_BELOW
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 
 BATCHES = (1, 64, 1024, 4096)
 #: modules exposing ``measure_rows(quick: bool) -> list[dict]`` appended to the table when importable
-EXTRA_ROWS = ("swarmloc.bench.speed.envs:measure_env_rows", "swarmloc.bench.speed.estimators:measure_rows")
+EXTRA_ROWS = ("swarmloc.bench.speed.world:measure_rows", "swarmloc.bench.speed.envs:measure_env_rows",
+              "swarmloc.bench.speed.estimators:measure_rows")
 
 
 @dataclass
@@ -141,22 +142,6 @@ def time_kernel(rec: Recording, batch: int) -> float:
         numba.set_num_threads(threads)
 
 
-def time_world(batch: int, n_steps: int) -> float:
-    """Seconds for ``n_steps`` full link-trust steps of Scale6-v0 at batch ``batch``."""
-    spec = get_spec("swarmloc/Scale6-v0")
-    core = LinkTrustCore(spec, batch)
-    trust = np.ones((batch, spec.n_uav, spec.n_channels))
-    core.reset(np.arange(batch))
-    core.step(trust)  # compile
-
-    def run() -> None:
-        core.reset(np.arange(batch))
-        for _ in range(n_steps):
-            core.step(trust)
-
-    return _best_of(run, 2)
-
-
 def machine_info() -> dict:
     """The machine the figures were measured on."""
     return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
@@ -181,12 +166,6 @@ def measure(quick: bool = False) -> list[dict]:
         sec = time_kernel(rec, b)
         rows.append({"impl": "kernel", "B": b, "uav_steps_per_s": b * t_steps / sec,
                      "env_steps_per_s": b * t_steps / sec})
-    n_uav = get_spec("swarmloc/Scale6-v0").n_uav
-    for b in batches:
-        steps = 20 if quick else (200 if b <= 64 else 50)
-        sec = time_world(b, steps)
-        rows.append({"impl": "world", "B": b, "uav_steps_per_s": b * n_uav * steps / sec,
-                     "env_steps_per_s": b * steps / sec})
     for target in EXTRA_ROWS:
         module, func = target.split(":")
         try:

@@ -1,0 +1,127 @@
+"""World-step throughput: the full link-trust step, fused and composed from the batch kernels.
+
+Rows (``impl``), Scale6-v0 (6 UAVs, 13 channels each), uniform trust:
+
+* ``world`` — ``LinkTrustCore.step``: truth, sensors, faults, the trust-weighted CEKF
+  update, prediction and features in one kernel call per step (``envs/core_kernel.py``).
+* ``world-unfused`` — the same step composed from the separate batch kernels
+  (``World.sense``, ``cekf_update``, ``cekf_predict``, ``channel_features``) with NumPy
+  copies in between: the core's path before the fused kernel (``UnfusedCore``; same
+  numbers, ``tests/test_world_kernel.py`` holds the two equal).
+
+Only steps are timed, not resets; each figure is the best of a few repeats (the machine
+may be shared). ``env_steps_per_s`` counts episodes × steps per second,
+``uav_steps_per_s`` UAVs × steps.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from swarmloc.envs import cekf
+from swarmloc.envs.core import LinkTrustCore
+from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.world import World
+
+TASK = "swarmloc/Scale6-v0"
+BATCHES = (1, 64, 1024, 4096)
+
+
+class UnfusedCore:
+    """The link-trust step composed from the separate batch kernels, as the core ran it before.
+
+    Same protocol and numbers as ``LinkTrustCore`` on a simulated world, for episodes that
+    start together and are stepped together (no partial reset, no finished episode):
+    ``reset(seeds)``, then ``step(trust)`` returns the core's outputs by name.
+
+    Args:
+        spec: a simulated task.
+        batch_size: B.
+    """
+
+    def __init__(self, spec: TaskSpec, batch_size: int):
+        self.spec = spec
+        self.world = World(spec, batch_size)
+        lay = self.world.layout
+        n_b, n, n_l = batch_size, spec.n_uav, lay.n_channels
+        self.x, self.P = np.zeros((n_b, n, 6)), np.zeros((n_b, n, 6, 6))
+        self.prior_pos, self.r0 = np.zeros((n_b, n, 3)), np.ascontiguousarray(lay.r0)
+        self.z, self.valid = np.zeros((n_b, n, n_l, 3)), np.zeros((n_b, n, n_l), dtype=bool)
+        self.out = {name: np.zeros((n_b, n, n_l)) for name in ("resid", "pred", "nis", "applied", "prev_trust")}
+        self.out.update({name: np.zeros((n_b, n, n_l), dtype=bool)
+                         for name in ("valid", "update_valid", "label", "active")})
+        self.out.update(jerk=np.zeros((n_b, n)), flops=np.zeros((n_b, n)), estimate=np.zeros((n_b, n, 3)),
+                        truth=np.zeros((n_b, n, 3)), steps=np.zeros(n_b, dtype=np.int64))
+
+    def reset(self, seeds: np.ndarray) -> dict[str, np.ndarray]:
+        """Start every episode; returns the first pending features."""
+        f, o = self.spec.filter, self.out
+        self.x[:] = self.world.reset(seeds)
+        self.P[:] = cekf.initial_covariance(len(seeds), self.spec.n_uav, f.init_pos_sigma, f.init_vel_sigma)
+        o["estimate"][:] = self.x[:, :, :3]
+        o["truth"][:] = self.world.buffers.pos
+        o["applied"][:] = o["prev_trust"][:] = 1.0
+        o["label"][:] = o["update_valid"][:] = o["active"][:] = False
+        o["flops"][:] = 0.0
+        o["steps"][:] = 0
+        self._advance()
+        return o
+
+    def step(self, trust: np.ndarray) -> dict[str, np.ndarray]:
+        """Apply ``trust`` ``(B, N, L)`` to the pending update, then sense and predict the next step."""
+        w, s, lay, o = self.world, self.spec, self.world.layout, self.out
+        cekf.cekf_update(self.x, self.P, self.z, self.valid, trust, lay.kind, lay.target, self.r0, w.anchors,
+                         w.landmarks, self.prior_pos, s.filter.alpha_th, s.filter.alpha_min, o["active"], o["flops"])
+        o["estimate"][:] = self.x[:, :, :3]
+        o["truth"][:] = w.buffers.pos
+        o["label"][:] = w.buffers.label
+        o["update_valid"][:] = self.valid
+        o["prev_trust"][:] = o["applied"]
+        o["applied"][:] = trust
+        o["steps"] += 1
+        self._advance()
+        return o
+
+    def _advance(self) -> None:
+        w, s, lay, o = self.world, self.spec, self.world.layout, self.out
+        prev_imu = w.buffers.imu.copy()
+        buf = w.sense()
+        cekf.cekf_predict(self.x, self.P, buf.imu, s.dt, s.sensors.imu_sigma, self.prior_pos)
+        self.z[:] = buf.z
+        self.valid[:] = buf.valid
+        cekf.channel_features(self.x, self.P, self.z, self.valid, lay.kind, lay.target, self.r0, w.anchors,
+                              w.landmarks, self.prior_pos, o["resid"], o["pred"], o["nis"])
+        o["jerk"][:] = np.linalg.norm(buf.imu - prev_imu, axis=-1)
+        o["valid"][:] = self.valid
+
+
+def time_steps(core: LinkTrustCore | UnfusedCore, batch: int, n_steps: int, repeats: int) -> float:
+    """Best seconds over ``repeats`` for ``n_steps`` steps from a fresh reset (the reset is not timed)."""
+    trust = np.ones((batch, core.spec.n_uav, core.spec.n_channels))
+    core.reset(np.arange(batch))
+    core.step(trust)  # compile / load the kernels
+    best = float("inf")
+    for _ in range(repeats):
+        core.reset(np.arange(batch))
+        t0 = time.perf_counter()
+        for _ in range(n_steps):
+            core.step(trust)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def measure_rows(quick: bool = False) -> list[dict]:
+    """The ``world`` and ``world-unfused`` rows at every batch size (``quick``: B = 1, 64, short runs)."""
+    spec = get_spec(TASK)
+    rows = []
+    for batch in (1, 64) if quick else BATCHES:
+        n_steps = 20 if quick else (300 if batch <= 64 else 50)
+        repeats = 2 if quick else (5 if batch <= 64 else 3)
+        for impl, make in (("world", LinkTrustCore), ("world-unfused", UnfusedCore)):
+            sec = time_steps(make(spec, batch), batch, n_steps, repeats)
+            rows.append({"impl": impl, "B": batch, "env_steps_per_s": batch * n_steps / sec,
+                         "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
+    return rows
