@@ -148,8 +148,8 @@ def attribute(method: str | LoadedMethod, episode: Episode, *, explainer: str = 
     shape = episode.trust.shape
     started = time.perf_counter()
     if form is not None:
-        result = integrated_gradients(form, episode, base, explained)
         own = _own_trust(fresh_copy(loaded.method), episode)
+        result = integrated_gradients(form, episode, base, explained, own)
         faithfulness = float(np.abs(result.trust - own[:, np.broadcast_to(explained, shape[1:])].ravel()).max())
         if faithfulness > FAITHFULNESS_TOL:
             raise ValueError(f"the differentiable form of {loaded.name} gives trust up to {faithfulness:.3g} away "

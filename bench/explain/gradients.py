@@ -7,8 +7,10 @@ of its UAV held at their recorded values, and the method's internal state at tha
 
 * ``MappoPolicy`` (the ``ChannelActor``: its per-UAV context is recomputed from the
   channel's block with x in place, so x reaches α through the context too);
-* ``MarkovSmoothing`` around a differentiable policy (madrl eq. 15–17; its memory
-  r(k − 1) is the state, α_eff(k − 1) is the previous-trust feature itself);
+* ``MarkovSmoothing`` around a stateless differentiable policy (madrl eq. 15–17; its
+  memory — α_eff(k − 1) and r(k − 1) — is state, held at its value on the recorded path,
+  as the model-agnostic explainer holds it: the wrapped actor still reads the
+  previous-trust feature);
 * any policy with a ``torch_trust(obs)`` method mapping one UAV's channels
   ``(..., L, F)`` to trust ``(..., L)`` (the hook for user torch policies; stateless).
 
@@ -34,7 +36,7 @@ from swarmloc.agents.mappo_policy import LOGIT_LIMIT, MappoPolicy, channel_conte
 from swarmloc.agents.protocols import TrustInput
 from swarmloc.agents.smoothing import MarkovSmoothing
 from swarmloc.envs.channels import N_KINDS
-from swarmloc.envs.observation import INNOVATION, KIND0, PREV_TRUST, SCALE_INNOVATION, VALID
+from swarmloc.envs.observation import INNOVATION, KIND0, SCALE_INNOVATION, VALID
 
 from .episode import Episode
 
@@ -61,8 +63,8 @@ class DifferentiableTrust:
         """``(B, N, L, S)`` state before the pending step."""
         raise NotImplementedError
 
-    def observe(self, inp: TrustInput) -> None:
-        """Advance the state past a step the method was given."""
+    def observe(self, inp: TrustInput, trust: np.ndarray) -> None:
+        """Advance the state past a step the method was given and the trust ``(B, N, L)`` it returned."""
 
     def channel_trust(self, x: Tensor, block: Tensor, slot: Tensor, state: Tensor) -> Tensor:
         raise NotImplementedError
@@ -175,43 +177,45 @@ class HookTrust(_Stateless):
 
 
 class SmoothedTrust(DifferentiableTrust):
-    """``MarkovSmoothing``: α_eff = v (β α_prev + (1 − β) α_raw) + (1 − v) α_prev.
+    """``MarkovSmoothing``: α_eff = v (β α_eff(k − 1) + (1 − β) α_raw) + (1 − v) α_eff(k − 1).
 
-    β = β_max exp(−γ |r − r(k − 1)|) with r = unsquash(innovation feature); α_prev is the
-    previous-trust feature (the trust applied at the last update is α_eff(k − 1)); the
-    state is r(k − 1), the innovation of the channel's last present measurement (0 at
-    the start), followed by the wrapped policy's state.
+    β = β_max exp(−γ |r − r(k − 1)|) with r = unsquash(innovation feature). The state is
+    [r(k − 1), α_eff(k − 1)]: the innovation of the channel's last present measurement
+    (0 at the start) and the smoother's last output (1 at the start), as the smoother
+    itself keeps them.
     """
+
+    state_size = 2
 
     def __init__(self, smoother: MarkovSmoothing, inner: DifferentiableTrust) -> None:
         self.beta_max, self.gamma = smoother.beta_max, smoother.gamma
         self.inner = inner
-        self.state_size = 1 + inner.state_size
 
     def reset(self, batch_size: int, shape: tuple[int, int]) -> None:
         self.inner.reset(batch_size, shape)
         self._resid = np.zeros((batch_size, *shape))
+        self._alpha = np.ones((batch_size, *shape))
 
     def state(self) -> np.ndarray:
-        return np.concatenate([self._resid[..., None], self.inner.state()], axis=-1)
+        return np.stack([self._resid, self._alpha], axis=-1)
 
-    def observe(self, inp: TrustInput) -> None:
-        self.inner.observe(inp)
+    def observe(self, inp: TrustInput, trust: np.ndarray) -> None:
         self._resid = np.where(inp.valid, inp.resid, self._resid)
+        self._alpha = np.asarray(trust, dtype=np.float64).copy()
 
     def channel_trust(self, x: Tensor, block: Tensor, slot: Tensor, state: Tensor) -> Tensor:
-        raw = self.inner.channel_trust(x, block, slot, state[:, 1:]).clamp(0.0, 1.0)
+        raw = self.inner.channel_trust(x, block, slot, state[:, 2:]).clamp(0.0, 1.0)
         y = x[:, INNOVATION]
         resid = SCALE_INNOVATION * y / (1.0 - y).clamp(min=1e-12)  # unsquash
         # β = β_max exp(−γ |r(k) − r(k−1)|);  α_eff = β α_eff(k−1) + (1 − β) α_raw
         beta = self.beta_max * torch.exp(-self.gamma * (resid - state[:, 0]).abs())
-        alpha_prev = x[:, PREV_TRUST]
+        alpha_prev = state[:, 1]
         valid = x[:, VALID]
         return valid * (beta * alpha_prev + (1.0 - beta) * raw) + (1.0 - valid) * alpha_prev
 
     def path_kinks(self, x: Tensor, xb: Tensor, block: Tensor, slot: Tensor, state: Tensor) -> Tensor:
         """The wrapped policy's kinks and where |r − r(k − 1)| changes sign (r is monotone in a)."""
-        inner = self.inner.path_kinks(x, xb, block, slot, state[:, 1:])
+        inner = self.inner.path_kinks(x, xb, block, slot, state[:, 2:])
         y, yb = x[:, INNOVATION], xb[:, INNOVATION]
         y_star = state[:, 0] / (state[:, 0] + SCALE_INNOVATION)  # squash(r(k − 1))
         moves = y != yb
@@ -224,7 +228,8 @@ def differentiable(method: object) -> DifferentiableTrust | None:
     """The differentiable form of a Track A method, or None when it has none (then use Shapley sampling)."""
     if isinstance(method, MarkovSmoothing):
         inner = differentiable(method.policy)
-        return None if inner is None else SmoothedTrust(method, inner)
+        # the smoother's memory is the outer output; a stateful inner form would need its own
+        return None if inner is None or inner.state_size else SmoothedTrust(method, inner)
     if isinstance(method, MappoPolicy):
         return ActorTrust(method)
     if callable(getattr(method, "torch_trust", None)):
@@ -250,7 +255,7 @@ class GradientResult:
     n_evals: np.ndarray
 
 
-def _rows(form: DifferentiableTrust, episode: Episode, explained: np.ndarray):
+def _rows(form: DifferentiableTrust, episode: Episode, explained: np.ndarray, own_trust: np.ndarray):
     """Per explained (step, episode, UAV, channel) row: x, its UAV block, slot and state."""
     n_b, n, n_l = episode.obs.shape[1:4]
     form.reset(n_b, (n, n_l))
@@ -261,7 +266,7 @@ def _rows(form: DifferentiableTrust, episode: Episode, explained: np.ndarray):
         xs.append(obs[b_idx, n_idx, l_idx])
         blocks.append(obs[b_idx, n_idx])
         states.append(form.state()[b_idx, n_idx, l_idx])
-        form.observe(episode.input(k))
+        form.observe(episode.input(k), own_trust[k])
     slot = np.tile(l_idx, episode.n_steps)
     return np.concatenate(xs), np.concatenate(blocks), slot, np.concatenate(states)
 
@@ -287,7 +292,7 @@ def _segments(points: Tensor) -> tuple[Tensor, Tensor, Tensor]:
 
 
 def integrated_gradients(form: DifferentiableTrust, episode: Episode, baseline: np.ndarray, explained: np.ndarray,
-                         n_steps: int = 4, tol: float = 2e-5, max_steps: int = 64,
+                         own_trust: np.ndarray, n_steps: int = 4, tol: float = 2e-5, max_steps: int = 64,
                          chunk: int = 512) -> GradientResult:
     """Integrated gradients of every explained channel at every step of a recorded episode.
 
@@ -302,6 +307,7 @@ def integrated_gradients(form: DifferentiableTrust, episode: Episode, baseline: 
         episode: the recorded inputs.
         baseline: ``(T, B, N, L, F)`` baseline features x̄.
         explained: ``(N, L)`` bool, the channels to explain (of every UAV and episode).
+        own_trust: ``(T, B, N, L)`` the method's own trust on the recorded inputs (its state).
         n_steps: Gauss–Legendre nodes per smooth piece of the first pass.
         tol: completeness gap that sends a row to another pass …
         max_steps: … with 4× the nodes per piece, up to this many.
@@ -310,7 +316,7 @@ def integrated_gradients(form: DifferentiableTrust, episode: Episode, baseline: 
     Returns:
         The ``GradientResult`` of the rows in (step, episode, UAV, channel) order.
     """
-    x, block, slot, state = _rows(form, episode, explained)
+    x, block, slot, state = _rows(form, episode, explained, own_trust)
     n_b, n, n_l = episode.obs.shape[1:4]
     b_idx, n_idx, l_idx = np.nonzero(np.broadcast_to(explained, (n_b, n, n_l)))
     xb = baseline[:, b_idx, n_idx, l_idx].reshape(-1, x.shape[1])
