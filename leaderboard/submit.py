@@ -31,9 +31,11 @@ from swarmloc.leaderboard.store import (
 )
 from swarmloc.leaderboard.verify import (
     DEFAULT_RUNNER,
+    Rerun,
     Tolerance,
     VerificationReport,
     VerifyLimits,
+    run_in_worker,
     verify_results,
 )
 
@@ -162,6 +164,7 @@ def submit(
     runner_path: Sequence[str | Path] = (),
     suite_lookup: SuiteLookup | None = None,
     store: LeaderboardStore | None = None,
+    rerun: Rerun = run_in_worker,
 ) -> SubmissionReceipt:
     """Validate, verify and store a submission.
 
@@ -191,6 +194,8 @@ def submit(
         runner_path: Extra directories for the worker's ``PYTHONPATH`` (runner code).
         suite_lookup: ``name -> suite`` (default ``swarmloc.bench.evaluation.suites.get_suite``).
         store: An open store (overrides ``db_url``).
+        rerun: What runs the sandboxed re-runs (see :func:`~swarmloc.leaderboard.verify.verify_results`;
+            :func:`~swarmloc.leaderboard.ray_rerun.ray_rerun` for Ray tasks).
 
     Returns:
         A receipt with the new ID, the stored entry and the verification report.
@@ -235,6 +240,7 @@ def submit(
                 method_path=search_path,
                 sandbox=sandbox,
                 store_file=active.database_file,
+                rerun=rerun,
             )
         entry = build_entry(validated, report, trusted=trust)
         new_id = active.add(entry)

@@ -16,13 +16,17 @@ from __future__ import annotations
 import math
 import random
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
 from swarmloc.leaderboard.errors import VerificationFailed
 from swarmloc.leaderboard.rerun import VerifyLimits, run_in_worker, worker_environment
+
+Rerun = Callable[..., tuple[list[dict], float]]
+"""``rerun(entry_point, episodes, *, weights, runner, runner_path, method_path, limits, sandbox, store_file)
+-> (episodes, wall_s)``: :func:`run_in_worker` or a drop-in for it."""
 
 DEFAULT_RUNNER: str = "swarmloc.bench.evaluation.runner:run_episodes"
 """``module:function`` the worker calls as ``run_episodes(method, episodes) -> list[dict]``."""
@@ -177,6 +181,7 @@ def verify_results(
     method_path: Sequence[str | Path] = (),
     sandbox: bool = True,
     store_file: Path | None = None,
+    rerun: Rerun = run_in_worker,
 ) -> VerificationReport:
     """Re-run a sample of the submitted episodes and compare their metrics.
 
@@ -195,6 +200,9 @@ def verify_results(
         method_path: Directories on the method's ``PYTHONPATH`` (its modules).
         sandbox: Run inside bubblewrap; False runs plain subprocesses with the limits only.
         store_file: The store's SQLite file, kept out of the sandbox's view.
+        rerun: What re-runs the sample, with :func:`run_in_worker`'s signature: that
+            function (here), or :func:`swarmloc.leaderboard.ray_rerun.ray_rerun`'s (the
+            same sandboxed re-runs as Ray tasks).
 
     Returns:
         The report (``report.ok`` is True).
@@ -206,7 +214,7 @@ def verify_results(
     seed = secrets.randbits(63) if sample_seed is None else sample_seed
     sample = sample_episodes(results.episode_keys(), sample_frac, min_episodes, seed)
     tol = tolerance or (EXACT if results.method.deterministic else NONDETERMINISTIC_TOLERANCE)
-    recomputed, wall = run_in_worker(
+    recomputed, wall = rerun(
         entry_point, sample, weights=weights, runner=runner, runner_path=runner_path,
         method_path=method_path, limits=limits, sandbox=sandbox, store_file=store_file,
     )
@@ -229,6 +237,7 @@ __all__ = [
     "EXACT",
     "NONDETERMINISTIC_TOLERANCE",
     "MetricMismatch",
+    "Rerun",
     "Tolerance",
     "VerificationReport",
     "VerifyLimits",

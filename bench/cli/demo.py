@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 #: the demo's default comparison: every classical link-trust baseline, the oracle, the
 #: learned MAPPO trust and one estimator per family that runs on every task, so that the
@@ -22,7 +23,13 @@ class Options:
     suite: str = "quick"
     """Suite to run."""
     workers: int = 2
-    """Worker processes."""
+    """Worker processes (or the CPUs of a local Ray cluster)."""
+    backend: Literal["serial", "process", "ray"] | None = None
+    """Where the evaluation jobs run: `serial`, `process` (worker processes here) or `ray` (a Ray cluster).
+    Default: serial with `--workers 1`, else process."""
+    address: str | None = None
+    """With `--backend ray`: the cluster to join, `auto` or `HOST:PORT` (default: $RAY_ADDRESS, else a local
+    cluster of `--workers` CPUs)."""
     methods: tuple[str, ...] = ()
     """Methods to compare (default: DEMO_METHODS; `--methods all` for every registered method)."""
     plots: bool = True
@@ -36,15 +43,22 @@ class Options:
 def run(opts: Options) -> int:
     """Run the demo."""
     from swarmloc.agents.registry import method_names
+    from swarmloc.bench.evaluation.backends import check_backend
     from swarmloc.bench.evaluation.demo import run_demo
     from swarmloc.bench.evaluation.suites import get_suite
 
     methods = list(opts.methods) or list(DEMO_METHODS)
     if methods == ["all"]:
         methods = method_names()
-    run_demo(methods, get_suite(opts.suite), opts.out, workers=opts.workers, plots=opts.plots)
+    try:
+        backend = check_backend(opts.backend, opts.workers, opts.address)
+    except ValueError as err:
+        print(f"error: {err}")
+        return 2
+    where = {"backend": backend, "address": opts.address}
+    run_demo(methods, get_suite(opts.suite), opts.out, workers=opts.workers, plots=opts.plots, **where)
     if opts.suite == "quick":  # the real flight joins the demo wherever its data is imported
-        run_real_flight_demo(methods, opts.out / "real-v0", workers=opts.workers, plots=opts.plots)
+        run_real_flight_demo(methods, opts.out / "real-v0", workers=opts.workers, plots=opts.plots, **where)
     if opts.leaderboard:
         # the CLI is every room's front door: only its handlers reach the leaderboard
         from swarmloc.leaderboard.shipped import show_leaderboard
@@ -53,7 +67,8 @@ def run(opts: Options) -> int:
     return 0
 
 
-def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: bool) -> bool:
+def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: bool, backend: str | None = None,
+                         address: str | None = None) -> bool:
     """The demo on suite ``real-v0`` if its data is here; otherwise print why it is skipped.
 
     Returns:
@@ -71,5 +86,5 @@ def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: boo
         Console().print(f"[yellow]skipping suite real-v0 (real UTIL flight):[/yellow] {why} "
                         "Import it with `swarmloc data import-util` (see `swarmloc evaluate --suite real-v0`).")
         return False
-    run_demo(methods, suite, out, workers=workers, plots=plots)
+    run_demo(methods, suite, out, workers=workers, plots=plots, backend=backend, address=address)
     return True

@@ -61,6 +61,13 @@ class Options:
     """Processes and threads each verification sandbox may hold."""
     max_file_mb: int = 64
     """Largest file (captured output included) a verification process may write, in MiB."""
+    backend: Literal["serial", "process", "ray"] | None = None
+    """Where the sandboxed re-runs run: on this machine (default; `serial` and `process` are the same here: one
+    re-run), or `ray`: as Ray tasks, one sandboxed re-run per chunk of tasks, the same sandbox rules and limits
+    for each (nodes see the method's files at the same paths)."""
+    address: str | None = None
+    """With `--backend ray`: the cluster to join, `auto` or `HOST:PORT` (default: $RAY_ADDRESS, else a local
+    cluster of every CPU here)."""
 
 
 def _module_search_path(opts: Options) -> tuple[Path, ...]:
@@ -85,9 +92,18 @@ def run(opts: Options, console: Console | None = None) -> int:
 
     from swarmloc.leaderboard.errors import StoreError, SubmissionError
     from swarmloc.leaderboard.submit import submit
-    from swarmloc.leaderboard.verify import VerifyLimits
+    from swarmloc.leaderboard.verify import VerifyLimits, run_in_worker
 
     out = console or Console()
+    if opts.address is not None and opts.backend != "ray":
+        out.print(Text(f"submission refused: --address {opts.address} names a Ray cluster; it needs --backend ray",
+                       style="bold red"))
+        return 1
+    rerun = run_in_worker
+    if opts.backend == "ray":
+        from swarmloc.leaderboard.ray_rerun import ray_rerun
+
+        rerun = ray_rerun(opts.address)
     try:
         receipt = submit(
             opts.results,
@@ -106,8 +122,9 @@ def run(opts: Options, console: Console | None = None) -> int:
                                 max_processes=opts.max_processes, max_file_bytes=opts.max_file_mb * 1024**2),
             search_path=opts.search_path or _module_search_path(opts),
             sandbox=opts.sandbox,
+            rerun=rerun,
         )
-    except (SubmissionError, StoreError, ValueError) as err:
+    except (SubmissionError, StoreError, ValueError, ImportError) as err:
         out.print(Text(f"submission refused: {err}", style="bold red"))
         return 1
     out.print(Text(receipt.describe()))

@@ -302,8 +302,6 @@ def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | No
 
 # --------------------------------------------------------------------------- suites, on a backend
 
-SEEDS_PER_JOB = 8
-"""A suite task's seeds run in chunks of this many, one job (and one batch) per chunk and method."""
 
 
 def _task_job(job: Job, weights: str | None) -> TaskOutcome:
@@ -317,33 +315,39 @@ def _task_cost(task: str, n_seeds: int) -> float:
     return float(s.n_steps * s.n_uav * (s.n_channels + 4) * n_seeds)
 
 
-def make_jobs(methods: Sequence[str], suite: Suite, seeds_per_job: int = SEEDS_PER_JOB, trace: bool = True,
+def make_jobs(methods: Sequence[str], suite: Suite, seeds_per_job: int | None = None, trace: bool = True,
               overrides: Mapping[str, Any] | None = None) -> list[Job]:
     """The jobs of a suite evaluation: every method on every chunk of every task's seeds, costliest task first.
+
+    A chunk is one batch. Most methods give the same numbers at any batch size; those
+    that do not (torch's matrix kernels block differently by batch size, which moves
+    ``mappo``'s metrics by ~1e-9) reproduce bit for bit only at the same chunking, so
+    the default is one chunk per task, as a whole-task batch has always been.
 
     Args:
         methods: method names or entry points.
         suite: the suite.
-        seeds_per_job: seeds per chunk, at least 1.
+        seeds_per_job: seeds per chunk, at least 1 (None: all of a task's seeds).
         trace: mark each task's first chunk to keep the trace of the task's first seed.
         overrides: task-spec overrides for every job (None: the registered tasks).
 
     Returns:
         The jobs, in the order to start them.
     """
-    if seeds_per_job < 1:
-        raise ValueError(f"seeds_per_job must be at least 1, got {seeds_per_job}")
+    if seeds_per_job is not None and seeds_per_job < 1:
+        raise ValueError(f"seeds_per_job must be at least 1 (or None: a task's seeds), got {seeds_per_job}")
     jobs = []
     for task in sorted(suite.tasks, key=lambda t: -_task_cost(t, len(suite.seeds(t)))):
         seeds = suite.seeds(task)
-        for start in range(0, len(seeds), seeds_per_job):
-            chunk = tuple(seeds[start:start + seeds_per_job])
+        size = seeds_per_job or len(seeds)
+        for start in range(0, len(seeds), size):
+            chunk = tuple(seeds[start:start + size])
             jobs += [Job(task, m, chunk, trace and start == 0, overrides) for m in methods]
     return jobs
 
 
 def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, backend: Backend | None = None,
-                     address: str | None = None, seeds_per_job: int = SEEDS_PER_JOB,
+                     address: str | None = None, seeds_per_job: int | None = None,
                      weights: Mapping[str, str | None] | None = None, trace: bool = True, progress: bool = True,
                      on_task: Callable[[TaskOutcome], None] | None = None,
                      overrides: Mapping[str, Any] | None = None) -> dict[str, MethodRun]:
@@ -358,7 +362,7 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
         workers: worker processes (``process``) or CPUs of a local Ray cluster, in [1, 64].
         backend: ``serial``, ``process`` or ``ray``; default ``serial`` for one worker, else ``process``.
         address: Ray cluster to join, ``auto`` or ``HOST:PORT`` (``ray`` only; default: a local one).
-        seeds_per_job: seeds per job (one batch each).
+        seeds_per_job: seeds per job, one batch each (None: a task's seeds; see ``make_jobs``).
         weights: optional method → weights file.
         trace: keep first-seed traces for plots.
         progress: show a progress bar (tqdm, on stderr).
