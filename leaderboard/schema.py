@@ -6,15 +6,15 @@ order and without running any submitted code:
 
 1. sizes: the results file and the weights file are within :class:`SizeLimits`;
 2. the results file parses and matches its schema;
-3. the entry point, track, privileged flag and weights hash agree with the results;
+3. the entry point, track, privileged flag and weights hash agree with the results
+   (metadata itself is checked by :class:`~swarmloc.leaderboard.metadata.SubmissionMetadata`);
 4. the suite exists and the results name its current version and hash;
 5. every (task, seed) of the suite is present, none twice, none extra;
 6. every metric is finite and within its physical bounds (:data:`METRIC_BOUNDS`), and
    the submitted aggregates agree with the episodes.
 
 Failures raise :class:`~swarmloc.leaderboard.errors.InvalidSubmission` listing the
-problems. Metadata strings are length-limited and free of control characters here;
-they are escaped wherever they are rendered (HTML, terminal, CSV).
+problems.
 """
 
 from __future__ import annotations
@@ -22,16 +22,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 import shlex
-import unicodedata
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Protocol
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results
 from swarmloc.bench.evaluation.stats import aggregate
@@ -42,14 +40,11 @@ from swarmloc.leaderboard.entry_points import (
     sha256_file,
 )
 from swarmloc.leaderboard.errors import InvalidSubmission
+from swarmloc.leaderboard.metadata import SubmissionMetadata
 
 SUBMISSION_VERSION: Literal[1] = 1
 """Version of the submission schema; bump on any change to :class:`Submission`."""
 
-MAX_NAME_CHARS: int = 64
-MAX_AUTHORS_CHARS: int = 256
-MAX_URL_CHARS: int = 512
-MAX_DESCRIPTION_CHARS: int = 2000
 MAX_REPORTED_PROBLEMS: int = 20
 
 METRIC_BOUNDS: dict[str, tuple[float, float]] = {
@@ -83,75 +78,6 @@ SUBSET_SUFFIX: str = "-subset"
 
 REQUIRED_METRICS: tuple[str, ...] = ("rmse",)
 """Metrics every episode must define (the rest may be null)."""
-
-# Bidirectional-override and isolate characters can make a name render as another one.
-_BIDI_CONTROLS = set("\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
-
-
-def _check_text(value: str, what: str, *, multiline: bool) -> str:
-    """Reject control characters (newlines/tabs allowed only in multi-line fields)."""
-    for char in value:
-        if multiline and char in "\n\t":
-            continue
-        if unicodedata.category(char) == "Cc" or char in _BIDI_CONTROLS:
-            raise ValueError(
-                f"{what} contains the control character {char!r} (U+{ord(char):04X}); "
-                f"only printable text is allowed"
-            )
-    return value
-
-
-class SubmissionMetadata(BaseModel):
-    """Who submits what; shown on the leaderboard.
-
-    Attributes:
-        name: Display name, 1–64 printable characters.
-        authors: Free text, at most 256 characters.
-        url: Optional ``http://`` or ``https://`` link (paper, code), at most 512 characters.
-        description: Free text, at most 2000 characters (newlines allowed).
-        track: ``"A"`` (link trust) or ``"B"`` (full estimator).
-        privileged: True when the method reads privileged information; privileged methods
-            are listed apart from the ranking.
-    """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    name: str = Field(min_length=1, max_length=MAX_NAME_CHARS)
-    authors: str = Field(default="", max_length=MAX_AUTHORS_CHARS)
-    url: str | None = Field(default=None, max_length=MAX_URL_CHARS)
-    description: str = Field(default="", max_length=MAX_DESCRIPTION_CHARS)
-    track: Literal["A", "B"]
-    privileged: bool = False
-
-    @field_validator("name")
-    @classmethod
-    def _name(cls, value: str) -> str:
-        if value != value.strip():
-            raise ValueError(f"name {value!r} has leading or trailing whitespace")
-        return _check_text(value, "name", multiline=False)
-
-    @field_validator("authors")
-    @classmethod
-    def _authors(cls, value: str) -> str:
-        return _check_text(value, "authors", multiline=False)
-
-    @field_validator("description")
-    @classmethod
-    def _description(cls, value: str) -> str:
-        return _check_text(value, "description", multiline=True)
-
-    @field_validator("url")
-    @classmethod
-    def _url(cls, value: str | None) -> str | None:
-        if value is None or value == "":
-            return None
-        if not re.match(r"^https?://[^\s\"'<>`]+$", value):
-            raise ValueError(
-                f"url {value!r} must start with http:// or https:// and contain no "
-                f"whitespace, quotes or angle brackets"
-            )
-        return value
-
 
 class Submission(BaseModel):
     """A leaderboard submission (versioned).
