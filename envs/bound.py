@@ -144,6 +144,54 @@ def bound_labels(valid: np.ndarray, injected: np.ndarray, sigma: np.ndarray,
     return np.asarray(valid, dtype=bool) & (np.asarray(injected) > label_sigmas * np.asarray(sigma))
 
 
+class BoundRecorder:
+    """Collects the bound's inputs step by step from a world's buffers.
+
+    Feed it the world's step buffers once per filter update, in order (steps 1 … T): for
+    ``World.sense`` that is every sensed step; inside a ``LinkTrustCore`` (or
+    ``TrustEnvBatch``), whose world always holds the *pending* step, ``core.world.buffers``
+    after the reset and after each of the first T − 1 steps. A runner that already steps a
+    world (e.g. the uniform reference rollout) thus gets the bound without a second
+    simulation.
+
+    Args:
+        spec: the task; layout, anchors, landmarks: the world's (``world.layout`` …).
+        n_episodes: B.
+        label_sigmas: k of ``bound_labels``.
+    """
+
+    def __init__(self, spec: TaskSpec, layout, anchors: np.ndarray, landmarks: np.ndarray, n_episodes: int,
+                 label_sigmas: float = BOUND_LABEL_SIGMAS):
+        self.spec, self.layout, self.label_sigmas = spec, layout, float(label_sigmas)
+        self.anchors = np.ascontiguousarray(anchors, dtype=float).reshape(-1, 3)
+        self.landmarks = np.ascontiguousarray(landmarks, dtype=float).reshape(-1, 3)
+        n_t, n, n_l = spec.n_steps, spec.n_uav, layout.n_channels
+        self.pos = np.empty((n_t, n_episodes, n, 3))
+        self.use = np.zeros((n_t, n_episodes, n, n_l), dtype=np.bool_)
+        self.steps = 0
+
+    def record(self, pos: np.ndarray, valid: np.ndarray, injected: np.ndarray) -> None:
+        """Record the next step: truth ``(B, N, 3)``, validity and injected error ``(B, N, L)``."""
+        k = self.steps
+        if k >= self.pos.shape[0]:
+            raise ValueError(f"{self.spec.task_id} has {self.pos.shape[0]} steps; step {k + 1} is one too many")
+        self.pos[k] = pos
+        self.use[k] = valid & ~bound_labels(valid, injected, self.layout.sigma, self.label_sigmas)
+        self.steps = k + 1
+
+    def inputs(self) -> BoundInputs:
+        """The recorded episodes as ``BoundInputs`` (every step must have been recorded)."""
+        if self.steps != self.pos.shape[0]:
+            raise ValueError(f"{self.steps} of {self.pos.shape[0]} steps of {self.spec.task_id} recorded")
+        f, lay = self.spec.filter, self.layout
+        return BoundInputs(
+            dt=float(self.spec.dt), imu_sigma=float(self.spec.sensors.imu_sigma),
+            p0_diag=np.array([f.init_pos_sigma**2] * 3 + [f.init_vel_sigma**2] * 3),
+            kind=np.ascontiguousarray(lay.kind), target=np.ascontiguousarray(lay.target),
+            r0=np.ascontiguousarray(lay.r0), anchors=self.anchors, landmarks=self.landmarks, pos=self.pos,
+            use=self.use)
+
+
 def record_inputs(spec: TaskSpec, seeds: np.ndarray | list[int],
                   label_sigmas: float = BOUND_LABEL_SIGMAS) -> tuple[BoundInputs, object]:
     """Run B episodes of the world and collect what the bound needs.
@@ -162,22 +210,11 @@ def record_inputs(spec: TaskSpec, seeds: np.ndarray | list[int],
     seeds = np.asarray(seeds, dtype=np.int64)
     world = make_world(spec, len(seeds))
     world.reset(seeds)
-    lay = world.layout
-    n_t, n_b = spec.n_steps, len(seeds)
-    pos = np.empty((n_t, n_b, spec.n_uav, 3))
-    use = np.empty((n_t, n_b, spec.n_uav, lay.n_channels), dtype=np.bool_)
-    for k in range(n_t):
+    rec = BoundRecorder(spec, world.layout, world.anchors, world.landmarks, len(seeds), label_sigmas)
+    for _ in range(spec.n_steps):
         buf = world.sense()
-        pos[k] = buf.pos
-        use[k] = buf.valid & ~bound_labels(buf.valid, buf.injected, lay.sigma, label_sigmas)
-    f = spec.filter
-    inputs = BoundInputs(
-        dt=float(spec.dt), imu_sigma=float(spec.sensors.imu_sigma),
-        p0_diag=np.array([f.init_pos_sigma**2] * 3 + [f.init_vel_sigma**2] * 3),
-        kind=np.ascontiguousarray(lay.kind), target=np.ascontiguousarray(lay.target),
-        r0=np.ascontiguousarray(lay.r0), anchors=np.ascontiguousarray(world.anchors, dtype=float),
-        landmarks=np.ascontiguousarray(world.landmarks, dtype=float), pos=pos, use=use)
-    return inputs, world
+        rec.record(buf.pos, buf.valid, buf.injected)
+    return rec.inputs(), world
 
 
 @njit(cache=True)
@@ -277,6 +314,7 @@ def _spd_inverse_leaf(A, X):
     """X = A⁻¹ of a small symmetric positive-definite A by Cholesky (A = L Lᵀ, A⁻¹ = L⁻ᵀ L⁻¹).
 
     Returns False (X undefined) when a pivot is not positive: A is not positive definite.
+    Loops run along rows (L and Wᵀ = L⁻ᵀ are stored row-major the way they are read).
     """
     n = A.shape[0]
     L = np.zeros((n, n))
@@ -292,21 +330,21 @@ def _spd_inverse_leaf(A, X):
             for k in range(j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
-    # W = L⁻¹ (lower triangular, forward substitution column by column)
-    W = np.zeros((n, n))
+    # Wt = (L⁻¹)ᵀ, upper triangular: row j of Wt is column j of L⁻¹ (forward substitution)
+    Wt = np.zeros((n, n))
     for j in range(n):
-        W[j, j] = 1.0 / L[j, j]
+        Wt[j, j] = 1.0 / L[j, j]
         for i in range(j + 1, n):
             s = 0.0
             for k in range(j, i):
-                s -= L[i, k] * W[k, j]
-            W[i, j] = s / L[i, i]
-    # A⁻¹ = Wᵀ W (exactly symmetric: upper triangle computed, mirrored)
+                s -= L[i, k] * Wt[j, k]
+            Wt[j, i] = s / L[i, i]
+    # A⁻¹ = L⁻ᵀ L⁻¹: X_ij = Σ_k (L⁻¹)_ki (L⁻¹)_kj = Σ_k Wt_ik Wt_jk (upper triangle, mirrored: exactly symmetric)
     for i in range(n):
         for j in range(i, n):
             s = 0.0
             for k in range(j, n):
-                s += W[k, i] * W[k, j]
+                s += Wt[i, k] * Wt[j, k]
             X[i, j] = s
             X[j, i] = s
     return True

@@ -10,11 +10,12 @@ from swarmloc.bench.evaluation import bounds as BB
 from swarmloc.bench.evaluation.recorder import EpisodeRecorder
 from swarmloc.bench.evaluation.suites import Suite
 from swarmloc.envs import cekf
-from swarmloc.envs.bound import BoundInputs, pcrlb, record_inputs
+from swarmloc.envs.bound import BoundInputs, BoundRecorder, pcrlb, record_inputs
 from swarmloc.envs.bound_reference import pcrlb_reference
 from swarmloc.envs.cekf_reference import run_reference
 from swarmloc.envs.channels import ANCHOR, GPS
 from swarmloc.envs.tasks import SIX_ANCHORS, get_spec
+from swarmloc.envs.trust_env import TrustEnvBatch
 from swarmloc.envs.world import World
 
 
@@ -173,3 +174,20 @@ def test_bounds_are_cached_per_process_and_on_disk(tmp_path, monkeypatch):
     suite = Suite("two", "0", (("swarmloc/AnchorFree-v0", 7),))
     monkeypatch.undo()
     assert BB.suite_bounds(suite, persistent=False)[("swarmloc/AnchorFree-v0", 7)].rmse is None
+
+
+def test_bounds_from_a_rollouts_world_equal_the_standalone_ones():
+    # a runner that steps a world already (the uniform rollout) can record the bound's inputs
+    # from it: the world holds the pending step after the reset and after each update
+    spec = get_spec("swarmloc/CascadedFaultRandom-v0", duration=26.0)
+    seeds = [1_000_000, 1_000_003]
+    env = TrustEnvBatch(spec, len(seeds))
+    env.reset(np.array(seeds))
+    world = env.core.world
+    rec = BoundRecorder(spec, env.layout, world.anchors, world.landmarks, len(seeds))
+    for k in range(spec.n_steps):
+        rec.record(world.buffers.pos, world.buffers.valid, world.buffers.injected)
+        env.step(np.ones((len(seeds), spec.n_uav, env.layout.n_channels)))
+    shared = BB.bounds_from_inputs(spec, seeds, rec.inputs(), world.schedule)
+    assert shared == BB.compute_bounds(spec, seeds)
+    assert all(b.healthy_rmse is not None for b in shared)

@@ -35,6 +35,7 @@ from swarmloc.bench.evaluation import metrics as M
 from swarmloc.envs.bound import (
     BOUND_LABEL_SIGMAS,
     BOUND_VERSION,
+    BoundInputs,
     bound_rmse,
     pcrlb,
     record_inputs,
@@ -117,7 +118,7 @@ def healthy_selection(spec: TaskSpec, schedule, b: int) -> tuple[np.ndarray, np.
 
 
 def compute_bounds(spec: TaskSpec, seeds: Sequence[int], label_sigmas: float = BOUND_LABEL_SIGMAS) -> list[Bound]:
-    """The bounds of some episodes of one task, computed now (no cache).
+    """The bounds of some episodes of one task, computed now (no cache): the world is simulated here.
 
     Args:
         spec: the task.
@@ -132,6 +133,25 @@ def compute_bounds(spec: TaskSpec, seeds: Sequence[int], label_sigmas: float = B
     if why is not None:
         return [Bound(spec.task_id, s, None, None, why) for s in seeds]
     inputs, world = record_inputs(spec, seeds, label_sigmas)
+    return bounds_from_inputs(spec, seeds, inputs, getattr(world, "schedule", None))
+
+
+def bounds_from_inputs(spec: TaskSpec, seeds: Sequence[int], inputs: BoundInputs, schedule) -> list[Bound]:
+    """The bounds of episodes whose inputs were recorded elsewhere (``envs.bound.BoundRecorder``).
+
+    Args:
+        spec: the task; seeds: ``(B,)`` the episodes' seeds.
+        inputs: their ``BoundInputs`` (B episodes, in the order of ``seeds``).
+        schedule: the world's ``FaultSchedule`` of those episodes (``world.schedule``; None for
+            a world without one), which the ``healthy_rmse`` selection of some tasks needs.
+
+    Returns:
+        One ``Bound`` per seed.
+    """
+    seeds = [int(s) for s in seeds]
+    why = unsupported_reason(spec)
+    if why is not None:
+        return [Bound(spec.task_id, s, None, None, why) for s in seeds]
     out = pcrlb(inputs)
     steps, nodes = scored_selection(spec)
     bounds = []
@@ -143,7 +163,7 @@ def compute_bounds(spec: TaskSpec, seeds: Sequence[int], label_sigmas: float = B
             bounds.append(Bound(spec.task_id, seed, None, None, reason))
             continue
         pos_var = out.pos_var[:, b]
-        healthy = healthy_selection(spec, getattr(world, "schedule", None), b)
+        healthy = healthy_selection(spec, schedule, b)
         healthy_value = None
         if healthy is not None and healthy[0].any() and healthy[1].any():
             healthy_value = bound_rmse(pos_var, healthy[1], healthy[0])
@@ -233,6 +253,22 @@ def episode_bounds(spec: TaskSpec | str, seeds: Sequence[int], *, label_sigmas: 
     for seed, bound in found.items():
         _MEMORY[(key, seed, BOUND_VERSION, float(label_sigmas))] = bound
     return [found[s] for s in seeds]
+
+
+def remember_bounds(spec: TaskSpec, bounds: Sequence[Bound], *, label_sigmas: float = BOUND_LABEL_SIGMAS,
+                    persistent: bool = True) -> None:
+    """Put bounds computed elsewhere (``bounds_from_inputs``) into the caches ``episode_bounds`` reads.
+
+    Args:
+        spec: the task they belong to; bounds: its episodes' bounds.
+        label_sigmas: the k they were computed with.
+        persistent: also merge them into the cache file.
+    """
+    key = spec_sha256(spec)
+    for bound in bounds:
+        _MEMORY[(key, bound.seed, BOUND_VERSION, float(label_sigmas))] = bound
+    if persistent and bounds:
+        _write_cache(_cache_file(key, label_sigmas), spec, label_sigmas, list(bounds))
 
 
 def suite_bounds(suite, *, label_sigmas: float = BOUND_LABEL_SIGMAS,
