@@ -180,7 +180,6 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                 f.valid[b, i, l] = f.world_valid[b, i, l]
 
 
-
 @structref.register
 class StepHandleType(types.StructRef):
     """numba type of a ``StepHandle``."""

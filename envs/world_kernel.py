@@ -1,8 +1,9 @@
-"""The world kernel: one step of truth, IMU, channels and faults for one episode.
+"""The world kernel: one step of truth, IMU, channels and faults per episode.
 
 ``WorldInputs`` names the task, the episode state and the step buffers, the
-``FaultSchedule`` (``faults.py``) the episodes' fault windows; ``sense_episode(w, fs, b)``
-advances episode b by one step (``sense_batch`` does it for every episode) and
+``FaultSchedule`` (``faults.py``) the episodes' fault windows. ``sense_episodes(w, fs, go,
+lo, hi)`` advances a range of episodes by one step on the calling thread (the link-trust
+core calls it inside its own step kernel), ``sense_batch`` the whole batch, and
 ``reset_episodes`` starts episodes at step 0. Every fault acts inside the kernel: range
 biases, Gauss–Markov NLOS, IMU cascades, camera and UWB outages, GPS drift, hybrid GPS
 noise, packet loss; visual odometry is sensed beside the truth. All draws come from the
@@ -44,13 +45,13 @@ class WorldInputs(NamedTuple):
         camera_range, peer_range: landmark and peer visibility radius [m].
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
 
-    Episode state (changed by ``reset_episodes`` and ``sense_episode``):
+    Episode state (changed by ``reset_episodes`` and ``sense_episodes``):
         seeds, steps: ``(B,)`` int64 episode seed and current step k (time k·dt).
         imu_const_bias: ``(B, N, 3)`` constant accelerometer bias [m/s²].
         velocity_bias: ``(B, N, 3)`` constant visual-odometry bias [m/s].
         gm_bias, gm_left: ``(B, N, L)`` Gauss–Markov NLOS bias [m] and steps left in the episode.
 
-    Step buffers (written by ``sense_episode`` for step k):
+    Step buffers (written by ``sense_episodes`` for step k):
         pos, vel, acc: ``(B, N, 3)`` truth [m, m/s, m/s²].
         imu: ``(B, N, 3)`` accelerometer reading for the interval (k−1, k] [m/s²].
         z: ``(B, N, L, 3)`` measurements; valid, label ``(B, N, L)`` bool present / faulty.
