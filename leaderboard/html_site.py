@@ -33,7 +33,7 @@ from swarmloc.leaderboard.ranking import (
     status,
     suite_boards,
 )
-from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.store import LeaderboardEntry, LeaderboardStore
 
 if TYPE_CHECKING:
     from swarmloc.leaderboard.site_plots import SitePlot
@@ -239,7 +239,8 @@ def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | 
     return images, None
 
 
-def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None) -> str:
+def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
+                 explanation: str = "") -> str:
     entry, v1 = standing.entry, standing.score
     results = json.loads(entry.results_json)
     prov = results.get("provenance", {})
@@ -329,13 +330,14 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
         "log2(RMSE_uniform / RMSE); metrics: mean over seeds, hover for IQM and 95% CI.</p>\n"
         f"{per_task}</section>",
         plots,
+        explanation,
         "</main>",
     ])
     return _page(f"{entry.name} — swarmloc leaderboard", body, root="../")
 
 
 def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None = None,
-                plots: bool = True) -> Path:
+                plots: bool = True, explanations: bool | None = None) -> Path:
     """Write the static leaderboard site.
 
     Layout: ``index.html`` (one section per suite: ranked, partial-coverage and privileged
@@ -343,7 +345,9 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     ``methods/<id>.html`` (metadata, provenance, per-task table, plots),
     ``results/<id>.json`` (the submitted results files, for download),
     ``plots/<id>/`` (images from ``swarmloc.bench.evaluation.plots.plot_results`` when available),
-    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn)
+    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn),
+    ``explain/<id>/`` (a shipped Track A method's trust decisions on the step-NLOS task:
+    :mod:`swarmloc.leaderboard.site_explain`)
     and ``static/`` (CSS and the vanilla-JS table sorter). No external resources.
 
     Args:
@@ -352,6 +356,8 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
         suite: Only this suite name (all suites when None).
         plots: Draw each method's plots (re-runs the first seed of every task when the
             results file has no traces beside it: minutes for a full suite).
+        explanations: Explain each shipped Track A method on the step-NLOS task (one 50 s
+            episode each, seconds to a minute per method); default: as ``plots``.
 
     Returns:
         Path of ``index.html``.
@@ -363,9 +369,10 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     for name in _STATIC_FILES:
         (out / "static" / name).write_bytes((package_static / name).read_bytes())
     boards = suite_boards(store.entries(suite))
+    explain = plots if explanations is None else explanations
     for board in boards:
         for standing in board.standings:
-            _write_method(out, standing, len(board.tasks), plots)
+            _write_method(out, standing, len(board.tasks), plots, explain)
     suite_figures = {}
     for board in boards:
         slug = _slug(board.name, board.version)
@@ -388,8 +395,8 @@ def _draw_suite_plots(board: SuiteBoard, plots_dir: Path) -> list[SitePlot]:
         return []
 
 
-def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool) -> None:
-    """A method's page, results file and (when ``plots``) its plots."""
+def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False) -> None:
+    """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
     entry = standing.entry
     results_file = out / "results" / f"{entry.id}.json"
     results_file.write_text(entry.results_json, encoding="utf-8")
@@ -398,8 +405,22 @@ def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool) -> N
         shutil.rmtree(plots_dir)
     images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
     (out / "methods" / f"{entry.id}.html").write_text(
-        _method_html(standing, n_tasks, images, error), encoding="utf-8"
+        _method_html(standing, n_tasks, images, error, _make_explanation(entry, out) if explain else ""),
+        encoding="utf-8",
     )
+
+
+def _make_explanation(entry: LeaderboardEntry, out: Path) -> str:
+    """The page's explanation section for a shipped Track A method ("" for any other entry)."""
+    from swarmloc.leaderboard import site_explain
+
+    if not site_explain.explainable(entry):
+        return ""
+    try:
+        return site_explain.explanation_section(site_explain.write_explanation(entry, out), None)
+    except Exception as err:  # a failed explanation must not take the site down
+        warnings.warn(f"explanation of {entry.name} failed: {err}", stacklevel=2)
+        return site_explain.explanation_section(None, f"{type(err).__name__}: {err}")
 
 
 __all__ = ["render_html"]

@@ -207,3 +207,30 @@ def test_cli_writes_figure_summary_and_arrays(tmp_path, capsys):
         assert z["values"].shape == (210, 1, 4, 11, 11)
         assert list(z["group_names"]) == list(GROUP_NAMES)
     assert unsquash(np.float64(0.5), 1.0) == 1.0
+
+
+def test_leaderboard_method_pages_link_their_explanation(tmp_path, monkeypatch):
+    """The site explains shipped Track A methods on the step-NLOS task and links it; Track B pages have none."""
+    import shutil
+
+    from swarmloc.leaderboard import site_explain
+    from swarmloc.leaderboard.shipped import RESULTS_DIR, load_shipped
+    from swarmloc.leaderboard.store import LeaderboardStore
+    from swarmloc.leaderboard.views import render_html
+
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    for name in ("chi2-gate", "dead-reckoning"):
+        shutil.copy(RESULTS_DIR / f"{name}.json", shipped / f"{name}.json")
+    monkeypatch.setattr(site_explain, "EXPLAIN_DURATION", 21.0)
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as store:
+        assert load_shipped(store, shipped).stored == ("chi2-gate", "dead-reckoning")
+        entries = {e.name: e for e in store.entries()}
+        site = tmp_path / "site"
+        render_html(store, site, plots=False, explanations=True)
+    gate = (site / "methods" / f"{entries['chi2-gate'].id}.html").read_text()
+    assert "Explanation on swarmloc/NLOSStep-v" in gate and "NIS" in gate
+    folder = site / "explain" / str(entries["chi2-gate"].id)
+    assert f'src="../explain/{entries["chi2-gate"].id}/figure.png"' in gate
+    assert {"figure.png", "summary.md", "summary.json"} <= {p.name for p in folder.iterdir()}
+    assert "explanation" not in (site / "methods" / f"{entries['dead-reckoning'].id}.html").read_text()
