@@ -102,7 +102,7 @@ def test_fast_matches_reference(task_id):
     start = {"swarmloc/CascadedFaultRandom-v0": 24.0, "swarmloc/GradualFault-v0": 95.0}.get(task_id, 0.0)
     spec = get_spec(task_id, duration=start + 30 * base.dt)
     inputs, _ = record_inputs(spec, [1_000_000, 1_000_001])
-    keep = slice(int(round(start / base.dt)), None)
+    keep = slice(round(start / base.dt), None)
     inputs = inputs._replace(pos=inputs.pos[keep], use=inputs.use[keep])
     # random channel dropout exercises every exclusion path on top of the world's own
     rng = np.random.default_rng(3)
@@ -150,7 +150,7 @@ def test_scored_steps_and_uavs_match_the_recorder(task_id):
     steps, nodes = BB.scored_selection(spec)
     assert (steps == rec.scored_steps).all() and (nodes == rec.nodes).all()
     for b in range(len(seeds)):
-        mine, theirs = BB.healthy_selection(spec, world.schedule, b), rec._healthy(b)  # noqa: SLF001
+        mine, theirs = BB.healthy_selection(spec, world.schedule, b), rec._healthy(b)
         assert (mine is None) == (theirs is None)
         if mine is not None:
             assert all((m == t).all() for m, t in zip(mine, theirs))
