@@ -12,27 +12,30 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 
+_FROM_RESULTS = "(default: the results file's)"
+
+
 @dataclass
 class Options:
     """Validate a results file, re-run a sample of its episodes in a sandbox, and store it."""
 
     results: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RESULTS")]
     """Results file written by `swarmloc evaluate` (it names the method, its track and privileged flag)."""
-    entry_point: str | None = None
-    """The method, if not the one the results file names: `package.module:factory`, `path/to/file.py:factory`
-    or a registered name."""
-    name: str | None = None
-    """Name shown on the leaderboard, at most 64 characters (default: the results file's method name)."""
-    track: Literal["A", "B"] | None = None
-    """A: link trust inside the env's CEKF; B: full estimator (default: the results file's)."""
+    entry_point: Annotated[str | None, tyro.conf.arg(metavar="ENTRY_POINT", help_behavior_hint=_FROM_RESULTS)] = None
+    """The method: `package.module:factory`, `path/to/file.py:factory` or a registered name."""
+    name: Annotated[str | None, tyro.conf.arg(metavar="STR", help_behavior_hint="(default: the results file's method "
+                                                                            "name)")] = None
+    """Name shown on the leaderboard, at most 64 characters."""
+    track: Annotated[Literal["A", "B"] | None, tyro.conf.arg(metavar="{A,B}", help_behavior_hint=_FROM_RESULTS)] = None
+    """A: link trust inside the env's CEKF; B: full estimator."""
     authors: str = ""
     """Authors (at most 256 characters)."""
     url: str | None = None
     """Paper or code link (http:// or https://)."""
     description: str = ""
     """Short description (at most 2000 characters)."""
-    privileged: bool | None = None
-    """The method reads ground truth or fault labels, listed apart and not ranked (default: the results file's)."""
+    privileged: Annotated[bool | None, tyro.conf.arg(metavar="{True,False}", help_behavior_hint=_FROM_RESULTS)] = None
+    """The method reads ground truth or fault labels (listed apart, not ranked)."""
     weights: Path | None = None
     """Weights file given to `swarmloc evaluate --weights`; its SHA-256 must match the results file."""
     search_path: tuple[Path, ...] = ()
