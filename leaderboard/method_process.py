@@ -373,6 +373,8 @@ def install_remote_method(entry_point: str, read_fd: int, write_fd: int) -> str:
     """Register a stand-in factory for ``entry_point``; the method string to give the runner."""
     import types
 
+    for fd in (read_fd, write_fd):
+        os.set_inheritable(fd, False)  # the pipes are the worker's alone
     channel = MethodChannel(read_fd, write_fd)
     _CHANNELS.append(channel)
     module = types.ModuleType(REMOTE_MODULE, "Stand-in for the submitted method (see method_process).")

@@ -158,10 +158,10 @@ class _ResponseReader(threading.Thread):
         while chunk := os.read(self.fd, 1 << 20):
             size += len(chunk)
             if size > _MAX_RESPONSE_BYTES:
-                self.too_large = True
-                break
-            chunks.append(chunk)
-        self.data = b"".join(chunks)
+                self.too_large = True  # keep draining, so that the worker can finish and exit
+            else:
+                chunks.append(chunk)
+        self.data = b"" if self.too_large else b"".join(chunks)
         os.close(self.fd)
 
 
@@ -368,7 +368,9 @@ def run_in_worker(
         finally:
             _kill(worker_proc)
             _kill(method_proc)
-            reader.join()
+            # The pipe closes with the worker's sandbox; unsandboxed, a process it left
+            # behind could hold it open, so the wait is bounded (the response is then cut).
+            reader.join(timeout=10)
         wall = time.monotonic() - started
         response = None
         if not reader.too_large:

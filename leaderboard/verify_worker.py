@@ -230,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-processes", type=int, default=0, help="RLIMIT_NPROC cap (0: none)")
     parser.add_argument("--max-file-bytes", type=int, default=0, help="RLIMIT_FSIZE cap (0: none)")
     args = parser.parse_args(argv)
+    os.set_inheritable(args.response_fd, False)  # no process the runner starts gets the response pipe
     apply_limits(args.memory_bytes, args.max_processes, args.max_file_bytes)
     request = json.loads(sys.stdin.buffer.read())
     cache_dir = os.environ.get("NUMBA_CACHE_DIR")
