@@ -83,7 +83,7 @@ def bound_task_means(bounds: dict[tuple[str, int], Bound]) -> dict[str, dict[str
 def compare(bounds: dict[tuple[str, int], Bound], shipped: dict) -> tuple[list[str], list[str]]:
     """Table lines of (a) and the violations (a method's task mean below the bound's)."""
     means = bound_task_means(bounds)
-    header = (f"{'task':34s} {'metric':12s} {'bound':>8s} {'best shipped':>22s} {'uniform':>8s} "
+    header = (f"{'task':34s} {'metric':12s} {'bound':>8s} {'best shipped':>29s} {'uniform':>8s} "
               f"{'best/bound':>10s}")
     lines = [header]
     violations = []
@@ -101,15 +101,16 @@ def compare(bounds: dict[tuple[str, int], Bound], shipped: dict) -> tuple[list[s
                 continue
             best = min(rows, key=rows.get)
             uniform = rows.get("uniform", float("nan"))
-            lines.append(f"{task:34s} {metric_shown:12s} {bound:8.4f} {best:>13s} {rows[best]:8.4f} {uniform:8.4f} "
+            lines.append(f"{task:34s} {metric_shown:12s} {bound:8.4f} {best:>20s} {rows[best]:8.4f} {uniform:8.4f} "
                          f"{rows[best] / bound:9.2f}×")
             violations += [f"{name} on {task} ({metric_shown}): {v:.4f} m < bound {bound:.4f} m"
                            for name, v in rows.items() if v < bound]
     return lines, violations
 
 
-def time_bounds(suite) -> tuple[float, float, float]:
-    """(CPU s, wall s, CPU s of the world simulation alone) to compute every bound of ``suite``, one thread.
+def time_bounds(suite) -> tuple[float, float, float, dict[str, tuple[float, float]]]:
+    """(CPU s, wall s, CPU s of the world simulation alone, task → (world, recursion) CPU s) of every
+    bound of ``suite``, on one thread.
 
     Nothing cached: each task's world is simulated (``record_inputs``) and the recursion run
     (``bounds_from_inputs``), as ``suite_bounds`` does on a cold cache. The world part is what
@@ -124,7 +125,7 @@ def time_bounds(suite) -> tuple[float, float, float]:
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        world_cpu = 0.0
+        per_task = {}
         cpu, wall = time.process_time(), time.perf_counter()
         for task in suite.tasks:
             spec, seeds = get_spec(task), suite.seeds(task)
@@ -132,9 +133,11 @@ def time_bounds(suite) -> tuple[float, float, float]:
                 continue
             started = time.process_time()
             inputs, world = record_inputs(spec, seeds)
-            world_cpu += time.process_time() - started
+            recorded = time.process_time()
             bounds_from_inputs(spec, seeds, inputs, world.schedule)
-        return time.process_time() - cpu, time.perf_counter() - wall, world_cpu
+            per_task[task] = (recorded - started, time.process_time() - recorded)
+        world_cpu = sum(w for w, _ in per_task.values())
+        return time.process_time() - cpu, time.perf_counter() - wall, world_cpu, per_task
     finally:
         numba.set_num_threads(threads)
 
@@ -199,6 +202,9 @@ def main(argv: list[str] | None = None) -> None:
     print(f"    uniform : {u_cpu:7.1f} s CPU {u_wall:7.1f} s wall   runs {[round(r[0], 1) for r in uniform_runs]}")
     print(f"    ratio   : {b_cpu / u_cpu:7.1%} CPU {b_wall / u_wall:7.1%} wall (target ≤ 20 %); "
           f"without the world simulation (inputs recorded from the uniform rollout): {(b_cpu - b_world) / u_cpu:.1%} CPU")
+    print("    bound CPU s per task (world simulation + recursion), last run:")
+    for task, (w, r) in sorted(bound_runs[-1][3].items(), key=lambda kv: -sum(kv[1])):
+        print(f"      {task:34s} {w:6.2f} + {r:6.2f}")
 
 
 if __name__ == "__main__":
