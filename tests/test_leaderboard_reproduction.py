@@ -35,12 +35,6 @@ def make():
 '''
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bench/evaluation/recorder.py averages delay_ms and energy_j over a boolean-masked (B, nodes) copy, which is "
-    "not C-contiguous for B > 1, so numpy sums it in another order than for B = 1 (last-ulp differences); "
-    "np.ascontiguousarray(terms.delay_ms[:, self.nodes]).mean(axis=1) (and energy_j) makes every batch size "
-    "sum like B = 1. Until then verification refuses some honest Track A methods; remove this mark with the fix."
-))
 def test_one_episode_alone_reproduces_the_full_batch(tmp_path: Path) -> None:
     method_file = tmp_path / "ones.py"
     method_file.write_text(POLICY)

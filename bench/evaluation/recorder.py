@@ -86,8 +86,10 @@ class EpisodeRecorder:
         self.team[k] = team_reward(terms)
         if self.scored_steps[k]:
             if flops is not None:
-                self.delay_ms += terms.delay_ms[:, self.nodes].mean(axis=1)
-                self.energy_j += terms.energy_j[:, self.nodes].mean(axis=1)
+                # a boolean-masked (B, nodes) copy is not C-contiguous for B > 1, and numpy would sum it in
+                # another order than for B = 1: an episode's metrics must not depend on its batch
+                self.delay_ms += np.ascontiguousarray(terms.delay_ms[:, self.nodes]).mean(axis=1)
+                self.energy_j += np.ascontiguousarray(terms.energy_j[:, self.nodes]).mean(axis=1)
             if self.stats is not None and applied is not None and previous is not None:
                 self.stats.add(applied, previous, valid, label)
         if self.trace is not None:
