@@ -167,7 +167,11 @@ def bounds_from_inputs(spec: TaskSpec, seeds: Sequence[int], inputs: BoundInputs
         healthy_value = None
         if healthy is not None and healthy[0].any() and healthy[1].any():
             healthy_value = bound_rmse(pos_var, healthy[1], healthy[0])
-        bounds.append(Bound(spec.task_id, seed, bound_rmse(pos_var, steps, nodes), healthy_value, None))
+        value = bound_rmse(pos_var, steps, nodes)
+        if not np.isfinite(value):
+            bounds.append(Bound(spec.task_id, seed, None, None, f"{spec.task_id} scores no step or UAV"))
+            continue
+        bounds.append(Bound(spec.task_id, seed, value, healthy_value, None))
     return bounds
 
 
