@@ -31,7 +31,7 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
-from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results, score_v1
 from swarmloc.bench.evaluation.stats import aggregate
 from swarmloc.leaderboard.entry_points import (
     EntryPoint,
@@ -76,8 +76,10 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
 SUBSET_SUFFIX: str = "-subset"
 """Name suffix of a suite restricted to some of its tasks (``bench.evaluation.suites.restrict_tasks``)."""
 
-REQUIRED_METRICS: tuple[str, ...] = ("rmse",)
-"""Metrics every episode must define (the rest may be null)."""
+REQUIRED_METRICS: tuple[str, ...] = ()
+"""Metrics every episode must define (the rest may be null). ``rmse`` is not among them: a method
+that cannot run a task has null metrics on all of its seeds, and is ranked on the tasks it
+covers (see :func:`coverage_problems`)."""
 
 class Submission(BaseModel):
     """A leaderboard submission (versioned).
@@ -254,6 +256,40 @@ def metric_problems(results: Results) -> list[str]:
     return problems
 
 
+def coverage_problems(results: Results) -> list[str]:
+    """A task run on some seeds but not others, or no task run at all.
+
+    A method either runs a task (an RMSE on every seed) or cannot run it (null on every
+    seed: partial coverage, ranked apart on its own tasks); half-run tasks are refused.
+    """
+    by_task: dict[str, list[bool]] = {}
+    for episode in results.episodes:
+        by_task.setdefault(episode.task, []).append(episode.metrics.rmse is not None)
+    problems = [f"task {task!r} has an RMSE on {sum(ran)} of its {len(ran)} seeds; a method runs a task on every "
+                f"seed or on none" for task, ran in by_task.items() if 0 < sum(ran) < len(ran)]
+    if not any(all(ran) for ran in by_task.values()):
+        problems.append("no task has an RMSE on its seeds: the method ran nothing")
+    return problems
+
+
+def score_problems(results: Results) -> list[str]:
+    """A ``score`` block (score v1) that disagrees with the episodes (the leaderboard recomputes it anyway)."""
+    if results.score is None:
+        return []
+    expected = score_v1(results.episodes, list(results.aggregates))
+    if expected is None:
+        return ["the results file has a score v1 block, but its episodes give none (no uniform_rmse)"]
+    problems = []
+    for name in ("S", "iqm", "times"):
+        a, b = getattr(results.score, name), getattr(expected, name)
+        if not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12):
+            problems.append(f"score.{name} is {a}, but the episodes give {b}")
+    if (results.score.covered, results.score.total) != (expected.covered, expected.total):
+        problems.append(f"score covers {results.score.covered}/{results.score.total} tasks, but the episodes "
+                        f"give {expected.covered}/{expected.total}")
+    return problems
+
+
 def aggregate_problems(results: Results) -> list[str]:
     """Submitted per-task mean and IQM values that disagree with the episodes.
 
@@ -378,8 +414,9 @@ def validate_submission(
         )
     problems += _coverage_problems(results, suite)
     problems += metric_problems(results)
+    problems += coverage_problems(results)
     if not problems:
-        problems += aggregate_problems(results)
+        problems += aggregate_problems(results) + score_problems(results)
     if problems:
         raise _fail(path, problems)
     search = [str(p) for p in submission.search_path]
@@ -432,10 +469,12 @@ __all__ = [
     "SuiteLookup",
     "ValidatedSubmission",
     "aggregate_problems",
+    "coverage_problems",
     "default_suite_lookup",
     "make_submission",
     "method_hash",
     "metric_problems",
+    "score_problems",
     "read_results",
     "validate_submission",
 ]

@@ -480,3 +480,40 @@ def test_cli_commands(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture
     refused = submit_command.run(submit_command.Options(results=tmp_path / "missing.json", entry_point="pkg.mod:make",
                                                         name="x", track="A", db_url=db_url), console)
     assert refused == 1 and "missing.json does not exist" in console.export_text()
+
+
+def _null_on(task: str, seeds: tuple[int, ...]):
+    def edit(t: str, s: int, values: dict[str, Any]) -> None:
+        if t == task and s in seeds:
+            for name in values:
+                values[name] = None
+    return edit
+
+
+def test_partial_coverage_is_accepted_but_half_run_tasks_are_not(tmp_path: Path) -> None:
+    """A method that cannot run a task (null on all its seeds) is valid; one that ran some seeds only is not."""
+    from swarmloc.leaderboard.schema import make_submission, validate_submission
+
+    whole = H.make_results_file(tmp_path / "p.json", metrics_edit=_null_on("swarmloc/NLOS-v0", H.SEEDS))
+    validated = validate_submission(make_submission(whole, "lb_fake_runner:good", META), H.suite_lookup)
+    assert sum(e.metrics.rmse is None for e in validated.results.episodes) == len(H.SEEDS)
+    half = H.make_results_file(tmp_path / "h.json", metrics_edit=_null_on("swarmloc/NLOS-v0", H.SEEDS[:1]))
+    with pytest.raises(InvalidSubmission, match="has an RMSE on 2 of its 3 seeds"):
+        validate_submission(make_submission(half, "lb_fake_runner:good", META), H.suite_lookup)
+    none = H.make_results_file(tmp_path / "n.json", metrics_edit=lambda t, s, v: v.update({k: None for k in v}))
+    with pytest.raises(InvalidSubmission, match="ran nothing"):
+        validate_submission(make_submission(none, "lb_fake_runner:good", META), H.suite_lookup)
+
+
+def test_a_forged_score_block_is_refused(tmp_path: Path) -> None:
+    from swarmloc.leaderboard.schema import make_submission, validate_submission
+
+    def with_uniform(t: str, s: int, values: dict[str, Any]) -> None:
+        values["uniform_rmse"] = 2.0 * values["rmse"]
+
+    def forge(raw: dict[str, Any]) -> None:
+        raw["score"]["S"] += 1.0
+
+    path = H.make_results_file(tmp_path / "f.json", metrics_edit=with_uniform, edit=forge)
+    with pytest.raises(InvalidSubmission, match=r"score\.S is .*, but the episodes give 1\.0"):
+        validate_submission(make_submission(path, "lb_fake_runner:good", META), H.suite_lookup)
