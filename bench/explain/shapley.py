@@ -105,20 +105,24 @@ class _Prober:
     def tiled(self, k: int) -> dict[str, np.ndarray]:
         """The recorded inputs of step k, one per shadow copy."""
         ep, e = self.episode, self.copy_episode
-        return {"obs": ep.obs[k][e].astype(np.float64), "resid": ep.resid[k][e], "pred": ep.pred[k][e],
-                "nis": ep.nis[k][e], "applied": ep.applied[k][e], "jerk": ep.jerk[k][e], "valid": ep.valid[k][e]}
+        return {"obs": ep.obs[k][e], "resid": ep.resid[k][e], "pred": ep.pred[k][e], "nis": ep.nis[k][e],
+                "applied": ep.applied[k][e], "jerk": ep.jerk[k][e], "valid": ep.valid[k][e]}
 
     def trust_input(self, k: int, fields: dict[str, np.ndarray]) -> TrustInput:
         ep = self.episode
-        return TrustInput.view(fields["obs"].astype(np.float32), fields["resid"], fields["pred"], fields["nis"],
-                               fields["applied"], fields["jerk"], fields["valid"], float(ep.times[k]), k + 1)
+        return TrustInput.view(fields["obs"], fields["resid"], fields["pred"], fields["nis"], fields["applied"],
+                               fields["jerk"], fields["valid"], float(ep.times[k]), k + 1)
 
-    def probe(self, k: int, x: np.ndarray, probes: np.ndarray) -> dict[str, np.ndarray]:
-        """Fields of C copies where copy c has its row's channel set to ``probes[c]`` (padded by repetition)."""
-        fields = self.tiled(k)
+    def probe(self, k: int, tiled: dict[str, np.ndarray], x: np.ndarray, probes: np.ndarray) -> dict[str, np.ndarray]:
+        """Fields of C copies where copy c has its row's channel set to ``probes[c]``.
+
+        A probe value is the observed feature or the baseline's (0, 1 or an observed
+        value), so writing it into the float32 observation is exact.
+        """
+        fields = {name: value.copy() for name, value in tiled.items()}
         c = np.arange(len(probes))
         r = c % self.m
-        b, n, l = self.b[r], self.n[r], self.l[r]
+        n, l = self.n[r], self.l[r]
         fields["obs"][c, n, l] = probes
         # a feature at its observed value keeps its exact raw field; one at the baseline gets the baseline's
         moved = probes != x[r]
@@ -127,7 +131,6 @@ class _Prober:
             fields[name][c[sel], n[sel], l[sel]] = raw_value(feature, probes[sel, feature])
         sel = moved[:, JERK]
         fields["jerk"][c[sel], n[sel]] = raw_value(JERK, probes[sel, JERK])
-        del b
         return fields
 
 
@@ -167,12 +170,14 @@ def shapley_sampling(method: Any, episode: Episode, baseline: np.ndarray, explai
     for k in range(n_t):
         x = episode.obs[k][rows].astype(np.float64)
         xb = baseline[k][rows]
+        tiled = prober.tiled(k)
 
-        def forward(probes: torch.Tensor, k: int = k, x: np.ndarray = x) -> torch.Tensor:
+        def forward(probes: torch.Tensor, k: int = k, x: np.ndarray = x, tiled: dict = tiled) -> torch.Tensor:
             p = probes.detach().numpy()
+            # the shadow's batch is fixed: a short call (the baseline alone) is padded by repetition
             padded = np.concatenate([p, np.resize(p, (copies - len(p), n_f))]) if len(p) < copies else p
             trial = fresh_copy(shadow, memo)
-            alpha = np.asarray(trial.act(prober.trust_input(k, prober.probe(k, x, padded))), dtype=np.float64)
+            alpha = np.asarray(trial.act(prober.trust_input(k, prober.probe(k, tiled, x, padded))), dtype=np.float64)
             return torch.as_tensor(np.clip(alpha[pick], 0.0, 1.0)[:len(p)])
 
         with torch.random.fork_rng(devices=[]):
@@ -184,8 +189,7 @@ def shapley_sampling(method: Any, episode: Episode, baseline: np.ndarray, explai
         # the shadow and the method itself step on the recorded inputs
         inp = episode.input(k)
         method_trust[k] = np.clip(np.asarray(main.act(inp), dtype=np.float64), 0.0, 1.0)
-        shadow_alpha = np.clip(np.asarray(shadow.act(prober.trust_input(k, prober.tiled(k))), dtype=np.float64),
-                               0.0, 1.0)
+        shadow_alpha = np.clip(np.asarray(shadow.act(prober.trust_input(k, tiled)), dtype=np.float64), 0.0, 1.0)
         trust[k] = shadow_alpha[pick][:m]
         batch_gap = max(batch_gap, float(np.abs(shadow_alpha[pick] - np.tile(method_trust[k][rows], N_GROUPS)).max()))
         values[k] = _spread_groups(attr, x, xb)
