@@ -28,6 +28,8 @@ PAPER_TABLE5 = {"ekf_fault_rmse": 3.0906, "madrl_fault_rmse": 0.8675, "alpha_nor
                 "alpha_attacked": 0.0875}
 #: the onset: the first this-many seconds of the fault window
 ONSET_S = 1.0
+#: recovery: the attacked channels' mean trust over this many seconds after the window (madrl: back within 2 s)
+RECOVERY_S = 5.0
 
 
 def fault_window(episode: Episode) -> tuple[float, float] | None:
@@ -79,6 +81,8 @@ def summarize(ex: Explanation) -> dict[str, Any]:
     rmse = window_rmse(ep, window)
     ref = window_rmse(ex.reference, window) if ex.reference is not None else None
     alpha_attacked, alpha_normal = _mean(attr.trust[attacked]), _mean(attr.trust[normal])
+    after = M.window_steps(ep.times, None if window is None else (window[1], window[1] + RECOVERY_S))
+    recovered = ep.valid & attacked_channel & after[:, None, None, None]
     return {
         "method": ep.method, "task": ep.spec.task_id, "duration_s": float(ep.spec.duration),
         "seeds": [int(s) for s in ep.seeds], "fault_window_s": window,
@@ -91,6 +95,7 @@ def summarize(ex: Explanation) -> dict[str, Any]:
         "gain_vs_reference": None if rmse is None or not ref else (ref - rmse) / ref,
         "alpha_attacked": alpha_attacked, "alpha_normal": alpha_normal,
         "suppression": None if not alpha_attacked or alpha_normal is None else alpha_normal / alpha_attacked,
+        "alpha_attacked_after": _mean(attr.trust[recovered]), "recovery_s": RECOVERY_S,
         "attacked_channel_steps": int(attacked.sum()), "normal_channel_steps": int(normal.sum()),
         "top_features": {
             "attacked_inside": _ranking(grouped, attacked),
@@ -131,7 +136,9 @@ def summary_markdown(summary: dict[str, Any], figure: str | None = None) -> str:
           f"{p['alpha_attacked']:.4f}", f"{p['alpha_normal']:.4f}",
           f"{p['alpha_normal'] / p['alpha_attacked']:.1f}×"]], "lrrrrrr")
     lines += ["", f"Attacked: labelled channel-steps ({s['attacked_channel_steps']}); normal: present, unlabelled "
-              f"channels of the same kind ({s['normal_channel_steps']}).", "",
+              f"channels of the same kind ({s['normal_channel_steps']}). After the window the attacked channels' "
+              f"mean α over {s['recovery_s']:g} s is {_f(s['alpha_attacked_after'])} (madrl: back to normal "
+              f"within 2 s).", "",
               "## Top features by mean |attribution|", "",
               "Signed mean in brackets: negative lowered α below the baseline's.", ""]
     names = {"attacked_inside": "attacked, inside the window", "attacked_onset": "attacked, first second",
