@@ -418,7 +418,7 @@ def _make_explanation(entry: LeaderboardEntry, out: Path) -> str:
         return ""
     try:
         return site_explain.explanation_section(site_explain.write_explanation(entry, out), None)
-    except Exception as err:  # a failed explanation must not take the site down
+    except Exception as err:  # noqa: BLE001 - a failed explanation must not take the site down
         warnings.warn(f"explanation of {entry.name} failed: {err}", stacklevel=2)
         return site_explain.explanation_section(None, f"{type(err).__name__}: {err}")
 

@@ -70,7 +70,7 @@ def _num(value: float | None, digits: int = 3) -> str:
 
 def explanation_section(ex: SiteExplanation | None, error: str | None, root: str = "../") -> str:
     """The method page's "Explanation" section (empty when there is neither an explanation nor an error)."""
-    e = lambda v: html.escape(str(v), quote=True)  # noqa: E731
+    e = lambda v: html.escape(str(v), quote=True)
     if ex is None:
         return "" if error is None else (f"<section id=\"explanation\"><h2>Explanation</h2><p class=\"meta\">"
                                          f"Explanation unavailable: {e(error)}</p></section>")
@@ -81,18 +81,18 @@ def explanation_section(ex: SiteExplanation | None, error: str | None, root: str
     span = "" if window is None else f" inside {window[0]:g}–{window[1]:g} s"
     return "\n".join([
         "<section id=\"explanation\"><h2>Explanation on " + e(s["task"]) + "</h2>",
-        f"<p class=\"meta\">Why the method trusted each channel as it did (madrl Experiment 4), seed "
-        f"{e(s['seeds'][0])}: {e(s['explainer'])} attributions of α to the observation features, baseline "
-        f"{e(s['baseline'])}.</p>",
+        (f"<p class=\"meta\">Why the method trusted each channel as it did (madrl Experiment 4), seed "
+         f"{e(s['seeds'][0])}: {e(s['explainer'])} attributions of α to the observation features, baseline "
+         f"{e(s['baseline'])}.</p>"),
         "<table class=\"facts\">",
         f"<tr><th scope=\"row\">Mean α, attacked channel{e(span)}</th><td>{_num(s['alpha_attacked'])}</td></tr>",
         f"<tr><th scope=\"row\">Mean α, normal channels{e(span)}</th><td>{_num(s['alpha_normal'])}</td></tr>",
-        f"<tr><th scope=\"row\">Fault-window RMSE [m]</th><td>{_num(s['fault_rmse'])} "
-        f"(uniform {_num(s['reference_fault_rmse'])})</td></tr>",
+        (f"<tr><th scope=\"row\">Fault-window RMSE [m]</th><td>{_num(s['fault_rmse'])} "
+         f"(uniform {_num(s['reference_fault_rmse'])})</td></tr>"),
         f"<tr><th scope=\"row\">What drives the attacked channel's α</th><td>{drivers}</td></tr>",
         "</table>",
-        f"<figure><img src=\"{root}{e(ex.figure)}\" alt=\"innovation, trust, error and attributions over time\" "
-        f"loading=\"lazy\"></figure>",
-        f"<p><a href=\"{root}{e(ex.markdown)}\">Table 5 summary (Markdown)</a> · "
-        f"<a href=\"{root}{e(ex.json)}\" download>summary JSON</a></p></section>",
+        (f"<figure><img src=\"{root}{e(ex.figure)}\" alt=\"innovation, trust, error and attributions over "
+         f"time\" loading=\"lazy\"></figure>"),
+        (f"<p><a href=\"{root}{e(ex.markdown)}\">Table 5 summary (Markdown)</a> · "
+         f"<a href=\"{root}{e(ex.json)}\" download>summary JSON</a></p></section>"),
     ])

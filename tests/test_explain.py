@@ -14,14 +14,14 @@ import torch
 
 pytest.importorskip("captum")
 
-from swarmloc.agents.mappo_policy import ChannelActor, MappoPolicy, weights_kinds  # noqa: E402
-from swarmloc.agents.registry import WEIGHTS_DIR, LoadedMethod, load_method  # noqa: E402
-from swarmloc.bench.explain import attribute, explain, replay  # noqa: E402
-from swarmloc.bench.explain.features import FEATURE_GROUP, GROUP_NAMES  # noqa: E402
-from swarmloc.bench.explain.report import summarize  # noqa: E402
-from swarmloc.envs.observation import NIS, SCALE_NIS, unsquash  # noqa: E402
-from swarmloc.envs.specs import Faults, NlosStep, Scoring  # noqa: E402
-from swarmloc.envs.tasks import get_spec  # noqa: E402
+from swarmloc.agents.mappo_policy import ChannelActor, MappoPolicy, weights_kinds
+from swarmloc.agents.registry import WEIGHTS_DIR, LoadedMethod, load_method
+from swarmloc.bench.explain import attribute, explain, replay
+from swarmloc.bench.explain.features import FEATURE_GROUP, GROUP_NAMES
+from swarmloc.bench.explain.report import summarize
+from swarmloc.envs.observation import NIS, SCALE_NIS, unsquash
+from swarmloc.envs.specs import Faults, NlosStep, Scoring
+from swarmloc.envs.tasks import get_spec
 
 SEED = 1_000_000
 
@@ -105,7 +105,7 @@ def test_sanity_randomised_actor_explains_differently(mappo_episode):
     moving = [0, 2, 3, 4]
     explained = ~np.isnan(a.values[..., moving])
     va, vr = a.values[..., moving][explained], r.values[..., moving][explained]
-    rank = lambda v: np.argsort(np.argsort(np.abs(v)))  # noqa: E731
+    rank = lambda v: np.argsort(np.argsort(np.abs(v)))
     spearman = np.corrcoef(rank(va), rank(vr))[0, 1]
     assert spearman < 0.5, spearman
     assert np.linalg.norm(va - vr) > 0.5 * np.linalg.norm(va)

@@ -320,7 +320,7 @@ def integrated_gradients(form: DifferentiableTrust, episode: Episode, baseline: 
     n_b, n, n_l = episode.obs.shape[1:4]
     b_idx, n_idx, l_idx = np.nonzero(np.broadcast_to(explained, (n_b, n, n_l)))
     xb = baseline[:, b_idx, n_idx, l_idx].reshape(-1, x.shape[1])
-    t = lambda a, dt=DTYPE: torch.as_tensor(a, dtype=dt)  # noqa: E731
+    t = lambda a, dt=DTYPE: torch.as_tensor(a, dtype=dt)
     ig = IntegratedGradients(form.channel_trust)
     ig.gradient_func = _row_gradients
     values = np.zeros_like(x)

@@ -117,10 +117,10 @@ def summary_markdown(summary: dict[str, Any], figure: str | None = None) -> str:
     window = s["fault_window_s"]
     span = "—" if window is None else f"{window[0]:g}–{window[1]:g} s"
     lines = [f"# Trust decisions of {s['method']} on {s['task']} (madrl Experiment 4)", "",
-             f"Seed(s) {', '.join(map(str, s['seeds']))}, {s['duration_s']:g} s; fault window {span}. "
-             f"Explainer **{s['explainer']}**, baseline **{s['baseline']}**; attributions add up to "
-             f"α(x) − α(baseline) within {s['completeness_gap']:.1e} and the explained function matches the "
-             f"method's act() within {s['faithfulness_gap']:.1e}.", ""]
+             (f"Seed(s) {', '.join(map(str, s['seeds']))}, {s['duration_s']:g} s; fault window {span}. "
+              f"Explainer **{s['explainer']}**, baseline **{s['baseline']}**; attributions add up to "
+              f"α(x) − α(baseline) within {s['completeness_gap']:.1e} and the explained function matches the "
+              f"method's act() within {s['faithfulness_gap']:.1e}."), ""]
     if figure:
         lines += [f"![Figure 6 chain]({figure})", ""]
     ref = s["reference"] or "reference"
@@ -135,10 +135,10 @@ def summary_markdown(summary: dict[str, Any], figure: str | None = None) -> str:
           f"{100 * (p['ekf_fault_rmse'] - p['madrl_fault_rmse']) / p['ekf_fault_rmse']:.2f} %",
           f"{p['alpha_attacked']:.4f}", f"{p['alpha_normal']:.4f}",
           f"{p['alpha_normal'] / p['alpha_attacked']:.1f}×"]], "lrrrrrr")
-    lines += ["", f"Attacked: labelled channel-steps ({s['attacked_channel_steps']}); normal: present, unlabelled "
-              f"channels of the same kind ({s['normal_channel_steps']}). After the window the attacked channels' "
-              f"mean α over {s['recovery_s']:g} s is {_f(s['alpha_attacked_after'])} (madrl: back to normal "
-              f"within 2 s).", "",
+    lines += ["", (f"Attacked: labelled channel-steps ({s['attacked_channel_steps']}); normal: present, unlabelled "
+                   f"channels of the same kind ({s['normal_channel_steps']}). After the window the attacked "
+                   f"channels' mean α over {s['recovery_s']:g} s is {_f(s['alpha_attacked_after'])} (madrl: back "
+                   f"to normal within 2 s)."), "",
               "## Top features by mean |attribution|", "",
               "Signed mean in brackets: negative lowered α below the baseline's.", ""]
     names = {"attacked_inside": "attacked, inside the window", "attacked_onset": "attacked, first second",
