@@ -42,6 +42,7 @@ from swarmloc.agents.protocols import (
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench.evaluation import metrics as M
 from swarmloc.bench.evaluation.backends import BACKENDS, MAX_WORKERS, Backend, Job, JobFailure, check_backend, run_jobs
+from swarmloc.bench.evaluation.bounds import episode_bounds
 from swarmloc.bench.evaluation.outcomes import (
     EvaluationFailed,
     Gathered,
@@ -265,11 +266,14 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
                 _REFERENCE_CACHE[(text, key, seed)] = float(m["rmse"])  # type: ignore[arg-type]
     uniform = reference_rmse(REFERENCE_UNIFORM, spec, seeds)
     oracle = reference_rmse(REFERENCE_ORACLE, spec, seeds)
+    # the information bound on the same scored steps and UAVs as ``rmse`` (cached per task spec and seed)
+    bounds = [b.rmse for b in episode_bounds(spec, seeds)]
     for metrics in outcome.episodes.values():
-        for m, u, o in zip(metrics, uniform, oracle):
+        for m, u, o, bound in zip(metrics, uniform, oracle, bounds):
             if m["rmse"] is not None:
                 m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
                 m["uniform_rmse"] = u  # the reference of score v1 (swarmloc.bench.evaluation.score)
+                m["bound_rmse"] = bound
     return outcome
 
 
