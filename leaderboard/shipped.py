@@ -10,8 +10,6 @@ leaderboard. Entries already in the store are left as they are.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,13 +102,23 @@ def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path
 
 
 def regenerate(methods: list[str], results_dir: Path = RESULTS_DIR, workers: int = 2) -> None:
-    """Re-evaluate ``methods`` on standard-v0 into ``results_dir`` (traces are not kept)."""
+    """Re-evaluate ``methods`` on standard-v0 into ``results_dir`` (traces are not kept).
+
+    All methods run in one evaluation, so the references every episode needs (uniform, the
+    oracles, the information bound) are computed once per worker, not once per method.
+    """
+    from swarmloc.bench.evaluation.results import write_results
+    from swarmloc.bench.evaluation.runner import evaluate_methods
+    from swarmloc.bench.evaluation.suites import get_suite
+
     results_dir.mkdir(parents=True, exist_ok=True)
-    for name in methods:
-        out = results_dir / f"{name}.json"
-        subprocess.run([sys.executable, "-m", "swarmloc.bench.cli", "evaluate", "--method", name,
-                        "--suite", "standard-v0", "--out", str(out), "--workers", str(workers)], check=True)
-        out.with_suffix(".traces.npz").unlink(missing_ok=True)
+    suite = get_suite("standard-v0")
+    runs = evaluate_methods(methods, suite, workers=workers, trace=False)
+    failed = {name: run.failed for name, run in runs.items() if run.failed}
+    if failed:
+        raise RuntimeError(f"not regenerated, some jobs failed: {failed}")
+    for name, run in runs.items():
+        write_results(results_dir / f"{name}.json", run.results(suite))
 
 
 def main() -> None:
