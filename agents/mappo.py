@@ -22,9 +22,11 @@ CleanRL style: the configuration and the training loop are here, the torch modul
   UAV's channels, the env's ``"state"``, and — privileged, since it never runs at
   execution — each UAV's position error) and is permutation-invariant over UAVs, so one
   critic trains across swarm sizes.
-* **Multi-task**: one torchrl ``Collector`` per task (each on its own batched env), cycled
+* **Multi-task**: one torchrl collector per task (each on its own batched env), cycled
   per batch: NLOS, step NLOS, swarm sizes 2…8, cascaded faults, the ideal case. Episode
   seeds are training seeds (< 1_000_000) drawn deterministically from the run's seed.
+  The collectors run here or, with ``collectors = N``, as N synchronized workers per task
+  (torchrl's ``MultiSyncCollector`` or ``RayCollector``; ``mappo_collect.py``).
 
 At execution the actor is deterministic and wrapped in adaptive Markov smoothing
 (madrl eq. 15–17), see ``mappo_policy.py``.
@@ -44,13 +46,12 @@ from typing import Callable
 import numpy as np
 import torch
 
-from swarmloc.envs import torchrl_env
 from swarmloc.envs.observation import N_FEATURES, VALID
-from swarmloc.envs.seeds import TRAINING_SEED_LIMIT
 from swarmloc.envs.tasks import get_spec
 
-from .mappo_nets import G, build_modules
+from .mappo_collect import Collection, EpisodeSeeds  # noqa: F401  (EpisodeSeeds re-exported)
 from .mappo_config import DEFAULT_TASKS, MappoConfig  # noqa: F401  (re-exported)
+from .mappo_nets import G, build_modules
 from .mappo_policy import MappoPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
@@ -61,25 +62,6 @@ REWARD_TERMS = {"accuracy": "reward_accuracy", "delay_penalty": "reward_delay", 
 
 
 # --------------------------------------------------------------------------- boilerplate
-
-
-class EpisodeSeeds:
-    """Training episode seeds for one task's batched env: deterministic, all < 1_000_000.
-
-    Episodes of a task have a fixed length and all B envs start together, so they end
-    together; before each reset the env is told the next B seeds (``set_seed(s)`` plays
-    s … s+B−1). ``drawn`` lists every seed handed out (checked by the caller).
-    """
-
-    def __init__(self, run_seed: int, task_index: int, batch_size: int) -> None:
-        self.rng = np.random.default_rng([run_seed, task_index, 0x5EED])
-        self.batch_size = batch_size
-        self.drawn: list[int] = []
-
-    def next_base(self) -> int:
-        base = int(self.rng.integers(0, TRAINING_SEED_LIMIT - self.batch_size))
-        self.drawn.extend(range(base, base + self.batch_size))
-        return base
 
 
 @dataclass
@@ -142,9 +124,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     """
     import numba
     from torch.utils.tensorboard import SummaryWriter
-    from torchrl.collectors import Collector
     from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
-    from torchrl.envs.utils import ExplorationType
     from torchrl.objectives import ClipPPOLoss
     from torchrl.objectives.value import GAE
     from tqdm import tqdm
@@ -159,32 +139,16 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     writer = writer or SummaryWriter(str(run_dir))
     writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
-    actor_net, prob_actor, policy, critic, noise, smoother = build_modules(cfg)
+    actor_net, prob_actor, policy, critic, _, _ = build_modules(cfg)  # noise, smoother: found by Collection
     flops_per_channel = count_flops_per_channel(actor_net) + SMOOTHING_FLOPS_PER_CHANNEL
 
-    # ---- one batched env + collector per task; training seeds only
-    envs, collectors, seeders = [], [], []
-    for t, task in enumerate(cfg.tasks):
-        n_channels = get_spec(task).n_channels
-        env = torchrl_env(task, cfg.num_envs, reward_weights=cfg.weights(),
-                          policy_flops=flops_per_channel * n_channels)
-        n_steps = env.task_spec.n_steps
-        if n_steps % cfg.rollout_steps:
-            raise ValueError(f"rollout_steps={cfg.rollout_steps} must divide the episode length of {task} "
-                             f"({n_steps} steps) so that reset seeds can be set between batches")
-        seeder = EpisodeSeeds(cfg.seed, t, cfg.num_envs)
-        base = seeder.next_base()
-        if check_seeds is not None:
-            check_seeds(list(range(base, base + cfg.num_envs)))
-        env.set_seed(base)
-        envs.append(env)
-        seeders.append(seeder)
-        collectors.append(Collector(env, policy, frames_per_batch=cfg.frames_per_batch, total_frames=-1,
-                                    trust_policy=True, exploration_type=ExplorationType.RANDOM,
-                                    auto_register_policy_transforms=False))
-    iterators = [iter(c) for c in collectors]
+    # ---- one batched env + collector per task (here, or N workers each); training seeds only
+    env_kwargs = [dict(reward_weights=cfg.weights(), policy_flops=flops_per_channel * get_spec(task).n_channels)
+                  for task in cfg.tasks]
+    collection = Collection(cfg.tasks, cfg.num_envs, cfg.rollout_steps, cfg.seed, policy, env_kwargs,
+                            collectors=cfg.collectors, backend=cfg.backend, address=cfg.address,
+                            check_seeds=check_seeds, threads=cfg.threads)
     probe_x, probe_channels = probe_features()
-    steps_done = [0] * len(cfg.tasks)
     running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
     # ---- PPO pieces
@@ -209,20 +173,9 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     for it in range(n_iters):
         t = it % len(cfg.tasks)
         task = cfg.tasks[t]
-        # the episode ends in this batch → tell the env the seeds of the next one
-        n_steps = envs[t].task_spec.n_steps
-        if (steps_done[t] + cfg.rollout_steps) % n_steps == 0:
-            base = seeders[t].next_base()
-            if check_seeds is not None:
-                check_seeds(list(range(base, base + cfg.num_envs)))
-            envs[t].set_seed(base)
         tic = time.perf_counter()
-        noise.start_batch()
-        if smoother is not None:
-            smoother.select(t, fresh=steps_done[t] % n_steps == 0)
-        batch = next(iterators[t])  # (B, T)
+        batch = collection.collect(t)  # (B, T): next seeds, noise block and smoother state set first
         t_collect = time.perf_counter() - tic
-        steps_done[t] += cfg.rollout_steps
         frames += batch.numel()
         if cfg.anneal_lr:
             optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
@@ -298,12 +251,11 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                         "optimizer": optimizer.state_dict(), "frames": frames, "config": asdict(cfg)},
                        run_dir / "checkpoint.pt")
     bar.close()
-    for c in collectors:
-        c.shutdown()
+    collection.shutdown()
     writer.flush()
     if own_writer:
         writer.close()
-    seeds = [s for sd in seeders for s in sd.drawn]
+    seeds = collection.episode_seeds()
     return TrainResult(actor_state={k: v.detach().clone() for k, v in actor_net.state_dict().items()},
                        frames=frames, wall_time_s=time.time() - start, iterations=n_iters, episode_seeds=seeds,
                        last_eval=last_eval)

@@ -6,6 +6,7 @@ The algorithm is in ``swarmloc.agents.mappo``; ``swarmloc train mappo`` parses t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 from swarmloc.envs.reward import RewardWeights
 from swarmloc.envs.seeds import TRAINING_SEED_LIMIT
@@ -85,6 +86,16 @@ class MappoConfig:
     """TensorBoard logs and checkpoints go here"""
     threads: int = 1
     """torch and numba threads (1: deterministic and polite on a shared machine)"""
+    collectors: int = 0
+    """collector workers per task (0: collect in this process; N: N synchronized workers per task, each
+    stepping num_envs / N of its episodes, weights sent before every batch; same seed → same weights for a
+    fixed N and backend)"""
+    backend: Literal["process", "ray"] = "process"
+    """where the collector workers run with ``collectors`` ≥ 1: worker processes here (torchrl
+    MultiSyncCollector) or Ray actors (torchrl RayCollector)"""
+    address: str | None = None
+    """Ray cluster to join with ``backend ray`` (``auto`` or HOST:PORT; default: $RAY_ADDRESS, else a local
+    cluster of ``collectors`` CPUs)"""
     progress: bool = True
     """show a tqdm progress bar"""
     reward_weights: dict = field(default_factory=dict)
@@ -96,6 +107,12 @@ class MappoConfig:
         for name in ("frames", "num_envs", "rollout_steps", "epochs", "minibatches", "threads"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.collectors < 0 or (self.collectors and self.num_envs % self.collectors):
+            raise ValueError(f"collectors must be 0 or a divisor of num_envs={self.num_envs}, got {self.collectors!r}")
+        if self.backend not in ("process", "ray"):
+            raise ValueError(f"backend must be 'process' or 'ray', got {self.backend!r}")
+        if self.address is not None and (self.backend != "ray" or not self.collectors):
+            raise ValueError(f"address={self.address!r} names a Ray cluster; it needs collectors >= 1 and backend ray")
         if not 0 <= self.seed < TRAINING_SEED_LIMIT:
             raise ValueError(f"seed must be a training seed in [0, {TRAINING_SEED_LIMIT}), got {self.seed!r}")
         if self.noise_hold < 1 or self.rollout_steps % self.noise_hold:
