@@ -15,7 +15,8 @@ position channels.
 | ``chi2-soft`` | α = 1 if λ < χ²₀.₉₅(dof) else exp(−(λ − χ²)/(2σ²)) | dtvirm §3.7 |
 | ``federated-coef`` | α = R0 / R_k from the allocation coefficient | federated eq. 17–21 |
 | ``random`` | α ~ U(0, 1), seeded per episode | the floor |
-| ``oracle`` | α = α_min on channels with a fault label, else 1 | privileged reference |
+| ``oracle`` | α = α_min on channels with a fault label v1, else 1 | privileged ceiling of score v1 |
+| ``oracle-v0`` | α = α_min on channels with a fault label v0, else 1 | reference of the v0 normalized score |
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from numba import njit
 from scipy.stats import chi2
 
 from swarmloc.envs.channels import KIND_DIM, ChannelLayout
+from swarmloc.envs.labels import LABEL_SIGMAS, label_thresholds
 from swarmloc.envs.rng import Stream, uniform
 
 from .protocols import PrivilegedInfo, TrustInput
@@ -253,32 +255,66 @@ class RandomTrust(_TrustPolicy):
         return out
 
 
+#: the label sets an oracle can read (``PrivilegedInfo``)
+LABEL_VERSIONS = ("v1", "v0")
+
+
 class OracleTrust(_TrustPolicy):
     """Privileged reference: α_min on channels whose ground-truth fault label is set.
 
-    Defines normalized score 1. It reads labels through ``observe_privileged``, which the
-    runner calls before every ``act``; its results are shown apart and never ranked.
+    With labels v1 (``oracle``) it is the ceiling of the trust policies (score v1); with
+    labels v0 (``oracle-v0``) it defines the v0 normalized score 1. It reads labels
+    through ``observe_privileged``, which the runner calls before every ``act``; its
+    results are shown apart and never ranked.
 
     Args:
         alpha_reject: trust of a labelled channel, in (0, 1] (default α_min = 0.01,
             below α_th, so the channel is skipped).
+        labels: ``"v1"`` (``PrivilegedInfo.labels_v1``) or ``"v0"`` (``PrivilegedInfo.labels``).
+        label_sigmas, vector_radius: v1 only: label at these thresholds instead of the
+            shipped ones (``PrivilegedInfo.systematic_sigmas`` above
+            ``envs.labels.label_thresholds(kind, label_sigmas, vector_radius)``; either may
+            be None for the shipped value). The calibration of the thresholds uses them.
     """
 
     privileged = True
 
-    def __init__(self, alpha_reject: float = ALPHA_MIN) -> None:
+    def __init__(self, alpha_reject: float = ALPHA_MIN, labels: str = "v1", label_sigmas: float | None = None,
+                 vector_radius: float | None = None) -> None:
         super().__init__()
         self.alpha_reject = _check_probability("alpha_reject", alpha_reject, low_open=True)
+        if labels not in LABEL_VERSIONS:
+            raise ValueError(f"labels must be one of {LABEL_VERSIONS}, got {labels!r}")
+        self.custom = label_sigmas is not None or vector_radius is not None
+        if self.custom and labels != "v1":
+            raise ValueError(f"label_sigmas and vector_radius apply to labels v1, not {labels!r}")
+        self.label_version, self.label_sigmas, self.vector_radius = labels, label_sigmas, vector_radius
+        if self.custom:
+            self._k = LABEL_SIGMAS if label_sigmas is None else label_sigmas
+            label_thresholds(np.zeros((1, 1), dtype=np.int64), self._k, vector_radius)  # validate now
+        self._threshold: np.ndarray | None = None
         self._labels: np.ndarray | None = None
 
     def reset(self, batch_size: int, layout: ChannelLayout, keys: np.ndarray) -> None:
         """Start B episodes; forget the labels."""
         super().reset(batch_size, layout, keys)
+        if self.custom:
+            self._threshold = label_thresholds(layout.kind, self._k, self.vector_radius)
         self._labels = None
 
     def observe_privileged(self, info: PrivilegedInfo) -> None:
-        """Receive the pending measurements' fault labels ``(B, N, L)``."""
-        labels = np.asarray(info.labels, dtype=bool)
+        """Receive the pending measurements' fault labels ``(B, N, L)`` (the version it reads)."""
+        if self.label_version == "v0":
+            labels = info.labels
+        elif not self.custom:
+            labels = info.labels_v1
+        else:
+            sigmas = info.systematic_sigmas
+            labels = None if sigmas is None else np.asarray(sigmas) > self._threshold
+        if labels is None:
+            need = "systematic_sigmas" if self.custom else "labels_v1"
+            raise ValueError(f"this oracle reads PrivilegedInfo.{need}, which was not provided")
+        labels = np.asarray(labels, dtype=bool)
         if labels.shape != self._shape:
             raise ValueError(f"labels must have shape (B, N, L) = {self._shape}, got {labels.shape}")
         self._labels = labels.copy()
@@ -335,5 +371,10 @@ def random_policy() -> RandomTrust:
 
 
 def oracle_policy() -> OracleTrust:
-    """Registry factory: ``oracle`` (privileged)."""
-    return OracleTrust(ALPHA_MIN)
+    """Registry factory: ``oracle`` (privileged, labels v1)."""
+    return OracleTrust(ALPHA_MIN, "v1")
+
+
+def oracle_v0_policy() -> OracleTrust:
+    """Registry factory: ``oracle-v0`` (privileged, labels v0: the v0 normalized score's reference)."""
+    return OracleTrust(ALPHA_MIN, "v0")

@@ -101,11 +101,15 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
     MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A", False, True,
                 "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
-    MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True, "privileged: α_min on labelled faults (score 1)"),
+    MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True,
+                "privileged: α_min on faults labelled v1 (the trust ceiling)"),
+    MethodEntry("oracle-v0", f"{_A}:oracle_v0_policy", "A", True, True,
+                "privileged: α_min on faults labelled v0 (v0 normalized score 1)"),
 )}
 
-#: the two methods that define the normalized score (0 and 1)
-REFERENCE_UNIFORM, REFERENCE_ORACLE = "uniform", "oracle"
+#: the two methods that define the v0 normalized score (0 and 1); the v0 oracle, so every
+#: v0 number stays what it was
+REFERENCE_UNIFORM, REFERENCE_ORACLE = "uniform", "oracle-v0"
 
 _ENTRY = re.compile(r"^(?P<module>[^:]+):(?P<attr>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)$")
 
@@ -133,7 +137,7 @@ def method_names(include_privileged: bool = True) -> list[str]:
     """Registered method names in display order.
 
     Args:
-        include_privileged: include the privileged oracle.
+        include_privileged: include the privileged oracles.
     """
     return [n for n, e in REGISTRY.items() if include_privileged or not e.privileged]
 

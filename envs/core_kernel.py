@@ -12,7 +12,9 @@ episodes, or the calling thread for a small batch) and takes its named tuples th
 2. if it goes on: the world senses step k+1 (``world_kernel.sense_episodes``; skipped when
    the world inputs are None, for worlds that sense in Python), every UAV predicts to it
    (``cekf.predict_uav``) and the per-channel innovation features at the prior are
-   computed (``cekf.features_uav``), with the IMU jerk ‖u(k+1) − u(k)‖.
+   computed (``cekf.features_uav``), with the IMU jerk ‖u(k+1) − u(k)‖, and the pending
+   measurements' labels v1 from the truth, the world's systematic errors and the priors
+   (``labels.channel_sigmas``: a peer link carries its neighbour's broadcast-estimate error).
 
 Without scoring (after a reset) only step 2 runs, for the episodes in ``advance``. Every
 episode goes through the same operations, in the same order, as with the separate batch
@@ -32,6 +34,7 @@ from numba.experimental import structref
 
 from .cekf import features_uav, predict_uav, update_uav
 from .faults import FaultSchedule
+from .labels import channel_sigmas
 from .world_kernel import BLOCK, SERIAL_BELOW, WorldInputs, block_bounds, sense_episodes
 
 
@@ -45,23 +48,30 @@ class FilterArrays(NamedTuple):
         alpha_th: trust at or below which a channel is left out of the update;
             alpha_min: floor of α in R = R0 / max(α, α_min).
         n_steps: updates per episode.
-        kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²].
+        kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²];
+            sigma ``(N, L)`` the nominal σ [m] (labels v1 divide by it, as the world does).
+        label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff.
         anchors: ``(A, 3)``; landmarks ``(M, 3)`` [m].
 
     The world's step buffers (views; the world writes them):
         world_pos: ``(B, N, 3)`` truth; world_imu ``(B, N, 3)`` IMU reading [m/s²].
         world_z: ``(B, N, L, 3)`` measurements; world_valid, world_label ``(B, N, L)`` bool.
+        world_systematic: ``(B, N, L, 3)`` the measurements' own signed systematic error [m].
 
     Filter state:
         x: ``(B, N, 6)`` mean [p, v]; P ``(B, N, 6, 6)`` covariance (the prior at the pending step).
         prior_pos: ``(B, N, 3)`` the broadcast prior positions (peer channels linearise at them).
         imu_prev: ``(B, N, 3)`` IMU reading of the step before the pending one (for the jerk).
 
+    Privileged (labels v1 of the pending measurements; never an observation):
+        pending_sigmas: ``(B, N, L)`` systematic error in units of σ_eff (0 where absent).
+        pending_label_v1: ``(B, N, L)`` bool, present and ``pending_sigmas > label_threshold``.
+
     Step outputs (the ``CoreStep`` arrays, same names and shapes):
         resid, pred, nis, valid: ``(B, N, L)`` features of the pending update.
         jerk: ``(B, N)``.
-        estimate, truth: ``(B, N, 3)``; label, update_valid, applied, prev_trust, active
-        ``(B, N, L)``; flops ``(B, N)`` of the last update.
+        estimate, truth: ``(B, N, 3)``; label, label_v1, update_valid, applied, prev_trust,
+        active ``(B, N, L)``; flops ``(B, N)`` of the last update.
         steps: ``(B,)`` int64 updates done; done ``(B,)`` bool.
 
     Work array:
@@ -76,6 +86,8 @@ class FilterArrays(NamedTuple):
     kind: np.ndarray
     target: np.ndarray
     r0: np.ndarray
+    sigma: np.ndarray
+    label_threshold: np.ndarray
     anchors: np.ndarray
     landmarks: np.ndarray
     world_pos: np.ndarray
@@ -83,10 +95,13 @@ class FilterArrays(NamedTuple):
     world_z: np.ndarray
     world_valid: np.ndarray
     world_label: np.ndarray
+    world_systematic: np.ndarray
     x: np.ndarray
     P: np.ndarray
     prior_pos: np.ndarray
     imu_prev: np.ndarray
+    pending_sigmas: np.ndarray
+    pending_label_v1: np.ndarray
     resid: np.ndarray
     pred: np.ndarray
     nis: np.ndarray
@@ -95,6 +110,7 @@ class FilterArrays(NamedTuple):
     estimate: np.ndarray
     truth: np.ndarray
     label: np.ndarray
+    label_v1: np.ndarray
     update_valid: np.ndarray
     applied: np.ndarray
     prev_trust: np.ndarray
@@ -143,6 +159,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                     f.truth[b, i, d] = f.world_pos[b, i, d]
                 for l in range(n_l):
                     f.label[b, i, l] = f.world_label[b, i, l]
+                    f.label_v1[b, i, l] = f.pending_label_v1[b, i, l]
                     f.update_valid[b, i, l] = f.world_valid[b, i, l]
                     f.prev_trust[b, i, l] = f.applied[b, i, l]
                     f.applied[b, i, l] = trust[b, i, l]
@@ -158,7 +175,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                     for d in range(3):
                         f.imu_prev[b, i, d] = f.world_imu[b, i, d]
         sense_episodes(w, fs, f.moving, lo, hi)
-    # ---- predict to it, then the features (peer channels read the neighbours' priors)
+    # ---- predict to it, then the features and labels v1 (peer channels read the neighbours' priors)
     q = f.imu_sigma * f.imu_sigma
     for b in range(lo, hi):
         if not f.moving[b]:
@@ -167,6 +184,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
             predict_uav(f.x[b, i], f.P[b, i], f.world_imu[b, i], f.dt, q)
             for d in range(3):
                 f.prior_pos[b, i, d] = f.x[b, i, d]
+        pos_b, prior_b, P_b = f.world_pos[b], f.prior_pos[b], f.P[b]
         for i in range(n):
             features_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], f.kind[i], f.target[i],
                          f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.resid[b, i], f.pred[b, i], f.nis[b, i],
@@ -178,6 +196,13 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
             f.jerk[b, i] = math.sqrt(j0 * j0 + j1 * j1 + j2 * j2)
             for l in range(n_l):
                 f.valid[b, i, l] = f.world_valid[b, i, l]
+                sig = 0.0
+                if f.world_valid[b, i, l]:
+                    e = f.world_systematic
+                    sig = channel_sigmas(f.kind[i, l], f.target[i, l], f.sigma[i, l], e[b, i, l, 0], e[b, i, l, 1],
+                                         e[b, i, l, 2], pos_b, prior_b, P_b, i)
+                f.pending_sigmas[b, i, l] = sig
+                f.pending_label_v1[b, i, l] = f.world_valid[b, i, l] and sig > f.label_threshold[i, l]
 
 
 @structref.register

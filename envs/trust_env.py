@@ -267,8 +267,16 @@ class TrustEnvBatch:
         return self._last
 
     def pending_labels(self) -> np.ndarray:
-        """``(B, N, L)`` fault labels of the pending measurements (privileged: metrics and oracles only)."""
+        """``(B, N, L)`` fault labels v0 of the pending measurements (privileged: metrics and oracles only)."""
         return self.core.world.buffers.label
+
+    def pending_labels_v1(self) -> np.ndarray:
+        """``(B, N, L)`` fault labels v1 of the pending measurements (``labels.py``; privileged)."""
+        return self.core.pending_label_v1
+
+    def pending_systematic_sigmas(self) -> np.ndarray:
+        """``(B, N, L)`` the pending measurements' systematic error in units of σ_eff (privileged)."""
+        return self.core.pending_systematic_sigmas
 
     def observation(self, out: np.ndarray | None = None) -> np.ndarray:
         """Observation ``(B, N, L, F)`` float32 in [0, 1] of the pending step (a new array unless ``out``)."""

@@ -3,7 +3,8 @@
 ``World.reset(seeds)`` starts B episodes; ``World.sense(k)`` advances them to step k
 (time ``k·dt``) and fills the step buffers: truth, the IMU reading that drives the
 prediction from step k−1 to k, every channel's measurement, its validity mask, the
-ground-truth fault label and the injected error. The world holds no filter: the CEKF
+ground-truth fault labels (v0, and v1 of the measurement's own error: ``labels.py``), the
+injected error and the signed systematic error. The world holds no filter: the CEKF
 backbone (Track A) or a method's own estimator (Track B) consumes what it senses.
 
 Batch layout: ``(B, N, ...)``; channel buffers ``(B, N, L, ...)``; measurements are
@@ -18,6 +19,7 @@ import numpy as np
 
 from .channels import ChannelLayout, build_layout
 from .faults import FaultSchedule, build_schedule
+from .labels import label_thresholds
 from .specs import TaskSpec
 from .trajectories import N_PARAMS, trajectory_kind, trajectory_params
 from .world_kernel import WorldInputs, reset_episodes, sense_batch
@@ -64,8 +66,12 @@ class SenseBuffers:
         imu: ``(B, N, 3)`` accelerometer reading for the last interval [m/s²].
         z: ``(B, N, L, 3)`` measurements (ranges in component 0).
         valid: ``(B, N, L)`` measurement present.
-        label: ``(B, N, L)`` ground-truth fault label.
+        label: ``(B, N, L)`` ground-truth fault label (v0: the v0 metrics and ``oracle-v0`` read it).
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
+        label_v1: ``(B, N, L)`` labels v1 of the measurement's own systematic error
+            (``labels.py``; the link-trust core adds the neighbour-estimate part of peer links).
+        systematic: ``(B, N, L, 3)`` signed systematic error: range bias in component 0, GPS
+            drift + heavy-tail excess per axis, zeros for landmarks and relative positions [m].
         velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (world frame, per-axis noise
             ``sensors.velocity_sigma`` plus a constant per-episode bias); None when the task
             has no VO sensor.
@@ -78,6 +84,8 @@ class SenseBuffers:
     valid: np.ndarray
     label: np.ndarray
     injected: np.ndarray
+    label_v1: np.ndarray
+    systematic: np.ndarray
     velocity: np.ndarray | None = None
 
 
@@ -101,6 +109,8 @@ class World:
         self.spec = spec
         self.batch_size = batch_size
         self.layout: ChannelLayout = build_layout(spec)
+        #: ``(N, L)`` labels v1 threshold per channel (``labels.label_thresholds``)
+        self.label_threshold = label_thresholds(self.layout.kind)
         self.anchors = np.asarray(spec.anchors, dtype=float).reshape(-1, 3)
         self.landmarks = np.asarray(spec.landmarks, dtype=float).reshape(-1, 3)
         n_b, n, n_l = batch_size, spec.n_uav, self.layout.n_channels
@@ -118,14 +128,17 @@ class World:
             anchors=self.anchors, landmarks=self.landmarks, kind=lay.kind, target=lay.target, linked=lay.linked,
             sigma=lay.sigma, imu_sigma=float(s.imu_sigma), camera_range=float(s.camera_max_range),
             peer_range=float(s.peers.max_range), has_velocity=s.velocity_sigma is not None,
-            velocity_sigma=float(s.velocity_sigma or 0.0), seeds=self.seeds, steps=self.steps,
+            velocity_sigma=float(s.velocity_sigma or 0.0), label_threshold=self.label_threshold, seeds=self.seeds,
+            steps=self.steps,
             imu_const_bias=per_uav(), velocity_bias=per_uav(), gm_bias=per_channel(), gm_left=per_channel(),
             pos=per_uav(), vel=per_uav(), acc=per_uav(), imu=per_uav(), z=np.zeros((n_b, n, n_l, 3)),
-            valid=per_channel(np.bool_), label=per_channel(np.bool_), injected=per_channel(), velocity=per_uav(),
+            valid=per_channel(np.bool_), label=per_channel(np.bool_), injected=per_channel(),
+            systematic=np.zeros((n_b, n, n_l, 3)), label_v1=per_channel(np.bool_), velocity=per_uav(),
         )
         w = self.inputs
         self.buffers = SenseBuffers(pos=w.pos, vel=w.vel, imu=w.imu, z=w.z, valid=w.valid, label=w.label,
-                                    injected=w.injected, velocity=w.velocity if w.has_velocity else None)
+                                    injected=w.injected, label_v1=w.label_v1, systematic=w.systematic,
+                                    velocity=w.velocity if w.has_velocity else None)
         self._everyone = np.ones(n_b, dtype=np.bool_)
 
     @property

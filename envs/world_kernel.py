@@ -21,10 +21,11 @@ from numba import njit, prange
 
 from .channels import ANCHOR, LANDMARK, PEER, PEER_REL
 from .faults import BIAS_UNIFORM, FaultSchedule
+from .labels import own_sigmas
 from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
 from .trajectories import truth_at
 
-LABEL_SIGMAS = 3.0  # an injected error above this many nominal σ is labelled a fault
+LABEL_SIGMAS = 3.0  # labels v0: an injected error above this many nominal σ is labelled a fault
 
 
 class WorldInputs(NamedTuple):
@@ -44,6 +45,8 @@ class WorldInputs(NamedTuple):
         imu_sigma: accelerometer noise σ [m/s²].
         camera_range, peer_range: landmark and peer visibility radius [m].
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
+        label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff
+            (``labels.label_thresholds``).
 
     Episode state (changed by ``reset_episodes`` and ``sense_episodes``):
         seeds, steps: ``(B,)`` int64 episode seed and current step k (time k·dt).
@@ -56,6 +59,10 @@ class WorldInputs(NamedTuple):
         imu: ``(B, N, 3)`` accelerometer reading for the interval (k−1, k] [m/s²].
         z: ``(B, N, L, 3)`` measurements; valid, label ``(B, N, L)`` bool present / faulty.
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
+        systematic: ``(B, N, L, 3)`` signed systematic error of the measurement (``labels.py``):
+            range bias in component 0, GPS drift + heavy-tail excess per axis, 0 otherwise [m].
+        label_v1: ``(B, N, L)`` bool labels v1 of the measurement's own error (present and
+            ``own_sigmas > label_threshold``; the core adds the neighbour-estimate part).
         velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (zeros without the sensor).
     """
 
@@ -73,6 +80,7 @@ class WorldInputs(NamedTuple):
     peer_range: float
     has_velocity: bool
     velocity_sigma: float
+    label_threshold: np.ndarray
     seeds: np.ndarray
     steps: np.ndarray
     imu_const_bias: np.ndarray
@@ -87,6 +95,8 @@ class WorldInputs(NamedTuple):
     valid: np.ndarray
     label: np.ndarray
     injected: np.ndarray
+    systematic: np.ndarray
+    label_v1: np.ndarray
     velocity: np.ndarray
 
 
@@ -136,9 +146,9 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     # The arrays are bound once: numba reference-counts every array read from a named tuple,
     # with an atomic operation, and keeps the pair when the read sits in a branch.
     pos, vel, acc, imu, z, velocity = w.pos, w.vel, w.acc, w.imu, w.z, w.velocity
-    valid, label, injected = w.valid, w.label, w.injected
+    valid, label, injected, systematic, label_v1 = w.valid, w.label, w.injected, w.systematic, w.label_v1
     anchors, landmarks, traj_prm = w.anchors, w.landmarks, w.traj_prm
-    kind, target, linked, sigma = w.kind, w.target, w.linked, w.sigma
+    kind, target, linked, sigma, label_threshold = w.kind, w.target, w.linked, w.sigma, w.label_threshold
     seeds, steps, imu_const_bias, velocity_bias, gm_bias, gm_left = (w.seeds, w.steps, w.imu_const_bias,
                                                                       w.velocity_bias, w.gm_bias, w.gm_left)
     bias_time, bias_param, bias_mask = fs.bias_time, fs.bias_param, fs.bias_mask
@@ -253,12 +263,16 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                     z[b, i, l, 0] = rng + err + sg * normal_at(key_anchor if ch == ANCHOR else key_peer, idx)
                     z[b, i, l, 1] = 0.0
                     z[b, i, l, 2] = 0.0
+                    systematic[b, i, l, 0] = err
+                    systematic[b, i, l, 1] = 0.0
+                    systematic[b, i, l, 2] = 0.0
                     lab = err > LABEL_SIGMAS * sg
                     if ch == PEER:
                         lab = lab or _imu_faulty(imu_time, imu_nodes, b, j, t)
                 elif ch == LANDMARK:
                     dist2 = 0.0
                     for d in range(3):
+                        systematic[b, i, l, d] = 0.0
                         rel = landmarks[j, d] - pos[b, i, d]
                         dist2 += rel * rel
                         z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
@@ -266,6 +280,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                         ok = False
                 elif ch == PEER_REL:
                     for d in range(3):
+                        systematic[b, i, l, d] = 0.0
                         z[b, i, l, d] = pos[b, j, d] - pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
                     lab = _imu_faulty(imu_time, imu_nodes, b, j, t)
                 else:  # GPS: p + drift + noise
@@ -280,11 +295,15 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
                             lo_nu, hi_nu = int(h[3]), int(h[4])
                             nu = lo_nu + int(uniform_at(key_mix, idx * 3 + d) * (hi_nu - lo_nu + 1))
-                            noise = h[0] * h[1] * student_t_at(key_gps, idx * 3 + d, nu) \
-                                + (1.0 - h[0]) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
+                            # the Student-t component is the heavy-tail excess (systematic), the
+                            # Gaussian one the nominal white noise
+                            tail = h[0] * h[1] * student_t_at(key_gps, idx * 3 + d, nu)
+                            noise = tail + (1.0 - h[0]) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
                         else:
+                            tail = 0.0
                             noise = sg * normal_at(key_gps, idx * 3 + d)
                         z[b, i, l, d] = pos[b, i, d] + drift + noise
+                        systematic[b, i, l, d] = drift + tail
                     err = math.sqrt(drift2)
                     lab = drift2 > 0.0  # a drifting fix is faulty from the first centimetre
                 if blind:
@@ -297,6 +316,8 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                 valid[b, i, l] = ok
                 label[b, i, l] = lab and ok
                 injected[b, i, l] = err
+                label_v1[b, i, l] = ok and own_sigmas(ch, systematic[b, i, l, 0], systematic[b, i, l, 1],
+                                                      systematic[b, i, l, 2], sg) > label_threshold[i, l]
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
@@ -342,6 +363,8 @@ def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, veloc
                     w.velocity[b, i, d] = w.vel[b, i, d] + w.velocity_bias[b, i, d]
         w.z[b] = 0.0
         w.injected[b] = 0.0
+        w.systematic[b] = 0.0
+        w.label_v1[b] = False
         w.valid[b] = False
         w.label[b] = False
         w.gm_bias[b] = 0.0

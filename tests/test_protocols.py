@@ -93,7 +93,10 @@ def test_protocols_runtime_checkable():
     assert isinstance(TrustEstimator(load_method("huber").method), Estimator)
 
 
-@pytest.mark.parametrize("name", ["chi2-soft", "random", "huber+smooth", "oracle"])
+# ``oracle`` (labels v1) differs between the tracks by design: on Track A its peer labels carry the
+# neighbour's broadcast-estimate error, which only the core knows; on Track B it gets the world's
+# labels v1 of the measurements' own errors (test_track_b_gets_the_world_labels)
+@pytest.mark.parametrize("name", ["chi2-soft", "random", "huber+smooth", "oracle-v0"])
 def test_trust_estimator_equals_the_core(name):
     """A policy gives the same episode through LinkTrustCore (Track A) and TrustEstimator (Track B)."""
     spec = get_spec("swarmloc/NLOS-v0", duration=8.0)
@@ -119,6 +122,24 @@ def test_privileged_info_only_for_privileged_methods():
     assert calls == []
     rollout(_loaded(Spy(), privileged=True), spec, SEEDS)
     assert len(calls) == spec.n_steps and calls[0].labels.shape == (len(SEEDS), spec.n_uav, spec.n_channels)
+
+
+def test_track_b_gets_the_world_labels():
+    """A privileged estimator gets labels v0 and the world's labels v1 of the very step it is given."""
+    seen = []
+
+    class Spy(DeadReckoning):
+        def observe_privileged(self, info: PrivilegedInfo) -> None:
+            seen.append((info.labels.copy(), info.labels_v1.copy(), info.systematic_sigmas))
+
+    spec = get_spec("swarmloc/NLOS-v0", duration=3.0)
+    rollout(_loaded(Spy(), privileged=True), spec, SEEDS)
+    world = World(spec, len(SEEDS))
+    world.reset(SEEDS)
+    for v0, v1, sigmas in seen:
+        buf = world.sense()
+        assert np.array_equal(v0, buf.label) and np.array_equal(v1, buf.label_v1) and sigmas is None
+    assert any(v1.any() for _, v1, _ in seen)
 
 
 def test_registry_metadata_and_loading(tmp_path):

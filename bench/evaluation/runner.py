@@ -8,14 +8,18 @@ index) and methods draw from per-episode keys, so an episode's metrics are ident
 alone or batched, in any process, on any backend — which is what lets the leaderboard's
 verifier re-run a sample with :func:`run_episodes`.
 
-**Normalized score.** Each episode's score compares its RMSE with the RMSE of the two
-reference methods, ``uniform`` (score 0) and the privileged ``oracle`` (score 1), run
+**Normalized score (v0).** Each episode's score compares its RMSE with the RMSE of the two
+reference methods, ``uniform`` (score 0) and the privileged ``oracle-v0`` (score 1), run
 on the same (task, seed) on the fly (their runs are shared when they are evaluated too,
 and cached per process). Nothing precomputed is shipped, so a score is always
 consistent with the code that produced it.
 
 Privileged methods get the pending measurements' fault labels through
-``observe_privileged`` before every ``act``/``step``; no other method ever does.
+``observe_privileged`` before every ``act``/``step``; no other method ever does. A
+``PrivilegedInfo`` carries labels v0 (what the v0 metrics read) and labels v1
+(``swarmloc.envs.labels``): on Track A the core's, peer links included through the
+neighbour's broadcast estimate, with the systematic error in σ_eff behind them; on Track B
+the world's, the measurement's own error only (an estimator's estimates are its own).
 """
 
 from __future__ import annotations
@@ -110,7 +114,9 @@ def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, tra
         inp = TrustInput.view(obs, cs.resid, cs.pred, cs.nis, cs.applied, cs.jerk, cs.valid,
                               (k + 1) * spec.dt, k + 1)
         if loaded.privileged:
-            policy.observe_privileged(PrivilegedInfo(labels=_readonly(env.pending_labels().copy())))
+            policy.observe_privileged(PrivilegedInfo(
+                labels=_readonly(env.pending_labels().copy()), labels_v1=_readonly(env.pending_labels_v1().copy()),
+                systematic_sigmas=_readonly(env.pending_systematic_sigmas().copy())))
         cs, terms = env.step(env.check(policy.act(inp)))
         rec.record(k, cs.estimate, cs.truth, cs.update_valid, cs.label, cs.applied, cs.prev_trust, terms.flops,
                    terms)
@@ -154,7 +160,8 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
         meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1,
                                     getattr(buf, "velocity", None))
         if loaded.privileged:
-            est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy())))
+            est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy()),
+                                                  labels_v1=_readonly(buf.label_v1.copy())))
         out = _check_output(est.step(meas), loaded.name, shape)
         if rec is None:
             rec = EpisodeRecorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
@@ -218,7 +225,7 @@ def _spec_key(spec: TaskSpec) -> str:
 
 
 def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[float]:
-    """RMSE of a reference method (``uniform`` or ``oracle``) per seed, cached per process."""
+    """RMSE of a reference method (``uniform`` or ``oracle-v0``) per seed, cached per process."""
     key = _spec_key(spec)
     missing = [int(s) for s in seeds if (name, key, int(s)) not in _REFERENCE_CACHE]
     if missing:
