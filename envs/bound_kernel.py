@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL
+from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
 
 _MIN_RANGE = 1e-9  # the CEKF skips a range at zero distance (no Jacobian): so does the bound
 
@@ -68,6 +68,17 @@ def position_information(pos, use, kind, target, r0, anchors, landmarks, Lam):
                     _add_block(Lam, j, j, u0, u1, u2, w)
                     _add_block(Lam, i, j, u0, u1, u2, -w)
                     _add_block(Lam, j, i, u0, u1, u2, -w)
+            elif ch == TDOA:
+                # h = ‖p_i − a_b‖ − ‖p_i − a_a‖ of the pair code j = a·A + b: H_i = (u_b − u_a)ᵀ
+                n_a = anchors.shape[0]
+                ia, ib = j // n_a, j % n_a
+                e0, e1, e2 = pos[i, 0] - anchors[ib, 0], pos[i, 1] - anchors[ib, 1], pos[i, 2] - anchors[ib, 2]
+                f0, f1, f2 = pos[i, 0] - anchors[ia, 0], pos[i, 1] - anchors[ia, 1], pos[i, 2] - anchors[ia, 2]
+                rb = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                ra = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+                if rb < _MIN_RANGE or ra < _MIN_RANGE:
+                    continue
+                _add_block(Lam, i, i, e0 / rb - f0 / ra, e1 / rb - f1 / ra, e2 / rb - f2 / ra, w)
             elif ch == GPS or ch == LANDMARK:
                 # h = p_i (GPS) or m − p_i (landmark): H_i = ±I, Hᵀ R⁻¹ H = I/r0
                 _add_diag(Lam, i, i, w)

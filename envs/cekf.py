@@ -8,7 +8,9 @@ Prediction (constant acceleration over dt, IMU reading u):
 
 Update (madrl §2.3): one joint update over the channels whose trust α > α_th, each with
 R_j = R0_j / max(α_j, α_min); Jacobians at the prior; peer channels use the neighbour's
-broadcast prior position as a known point.
+broadcast prior position as a known point. A TDOA channel of anchor pair (i, j) is one
+scalar row h = ‖p − a_j‖ − ‖p − a_i‖ with H = u_j − u_i on the position block (u_k the unit
+vector from anchor k to the prior position).
 
 The kernel processes the joint update as a sequence of scalar rows, all linearised at the
 prior x⁻: for rows z_r = h_r(x⁻) + H_r (x − x⁻) + v_r with diagonal R, sequential linear
@@ -27,8 +29,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER
-from .cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, VECTOR_ROW_FLOPS
+from .channels import ANCHOR, GPS, LANDMARK, PEER, TDOA
+from .cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
 
 _MIN_RANGE = 1e-9
 
@@ -128,6 +130,23 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             # H enters as +hvec; _scalar_update uses hvec when col < 0
             _scalar_update(x, P, hvec, -1, y, r, c)
             flops += RANGE_ROW_FLOPS
+        elif ch == TDOA:
+            # the pair (i, j) of target code j = i·A + j': h = ‖p − a_j'‖ − ‖p − a_i‖
+            n_a = anchors.shape[0]
+            ia, ib = j // n_a, j % n_a
+            e0, e1, e2 = x0[0] - anchors[ib, 0], x0[1] - anchors[ib, 1], x0[2] - anchors[ib, 2]
+            f0, f1, f2 = x0[0] - anchors[ia, 0], x0[1] - anchors[ia, 1], x0[2] - anchors[ia, 2]
+            rb = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            ra = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+            if rb < _MIN_RANGE or ra < _MIN_RANGE:
+                continue
+            # H = (p⁻ − a_j)ᵀ/‖p⁻ − a_j‖ − (p⁻ − a_i)ᵀ/‖p⁻ − a_i‖ at the prior
+            hvec[0], hvec[1], hvec[2] = e0 / rb - f0 / ra, e1 / rb - f1 / ra, e2 / rb - f2 / ra
+            # y = z − h(x⁻) − H (x − x⁻)
+            y = z[l, 0] - (rb - ra) - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1])
+                                       + hvec[2] * (x[2] - x0[2]))
+            _scalar_update(x, P, hvec, -1, y, r, c)
+            flops += TDOA_ROW_FLOPS
         else:
             for d in range(3):
                 if ch == GPS:
@@ -239,6 +258,23 @@ def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos
             resid[l] = abs(y)
             pred[l] = rng
             nis[l] = y * y / s
+        elif ch == TDOA:
+            n_a = anchors.shape[0]
+            ia, ib = j // n_a, j % n_a
+            e0, e1, e2 = x[0] - anchors[ib, 0], x[1] - anchors[ib, 1], x[2] - anchors[ib, 2]
+            f0, f1, f2 = x[0] - anchors[ia, 0], x[1] - anchors[ia, 1], x[2] - anchors[ia, 2]
+            rb = max(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), _MIN_RANGE)
+            ra = max(math.sqrt(f0 * f0 + f1 * f1 + f2 * f2), _MIN_RANGE)
+            # h = ‖p⁻ − a_j‖ − ‖p⁻ − a_i‖, H = u_j − u_i on the position block
+            h0, h1, h2 = e0 / rb - f0 / ra, e1 / rb - f1 / ra, e2 / rb - f2 / ra
+            y = z[l, 0] - (rb - ra)
+            # S = H P_pp Hᵀ + R0
+            s = (h0 * (P[0, 0] * h0 + P[0, 1] * h1 + P[0, 2] * h2)
+                 + h1 * (P[1, 0] * h0 + P[1, 1] * h1 + P[1, 2] * h2)
+                 + h2 * (P[2, 0] * h0 + P[2, 1] * h1 + P[2, 2] * h2) + r0[l])
+            resid[l] = abs(y)
+            pred[l] = abs(rb - ra)
+            nis[l] = y * y / s
         else:
             # 3-vector channel: S = P_pp + R0·I (H = ±I on position)
             dist2 = 0.0
@@ -264,7 +300,8 @@ def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior
     """Per-channel innovation features at the prior (before the policy picks trust).
 
     Outputs ``(B, N, L)``: resid = ‖y‖ (innovation magnitude), pred = predicted distance
-    ‖h(x⁻)‖ to the channel's target (0 for GPS), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0.
+    ‖h(x⁻)‖ to the channel's target (0 for GPS; the predicted range difference's magnitude
+    for TDOA), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0.
     Invalid channels get zeros.
     """
     n_b, n = z.shape[0], z.shape[1]

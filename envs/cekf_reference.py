@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER
+from .channels import ANCHOR, GPS, LANDMARK, PEER, TDOA, tdoa_pair
 
 
 def transition(dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +37,7 @@ def measurement_rows(x: np.ndarray, z: np.ndarray, kind: int, target: int, ancho
                      landmarks: np.ndarray, prior_pos: np.ndarray):
     """Innovation rows of one channel at the prior: (y, H) with y = z − h(x⁻), H = ∂h/∂x.
 
-    Returns None for a degenerate range (zero distance).
+    Returns None for a degenerate range (zero distance to an anchor, a peer or a TDOA anchor).
     """
     p = x[:3]
     if kind in (ANCHOR, PEER):
@@ -49,6 +49,15 @@ def measurement_rows(x: np.ndarray, z: np.ndarray, kind: int, target: int, ancho
         H = np.zeros((1, 6))
         H[0, :3] = (p - q) / rng
         return np.array([z[0] - rng]), H
+    if kind == TDOA:
+        i, j = tdoa_pair(target, len(anchors))
+        # h = ‖p − a_j‖ − ‖p − a_i‖, H = (p − a_j)ᵀ/‖p − a_j‖ − (p − a_i)ᵀ/‖p − a_i‖
+        r_j, r_i = np.linalg.norm(p - anchors[j]), np.linalg.norm(p - anchors[i])
+        if r_j < 1e-9 or r_i < 1e-9:
+            return None
+        H = np.zeros((1, 6))
+        H[0, :3] = (p - anchors[j]) / r_j - (p - anchors[i]) / r_i
+        return np.array([z[0] - (r_j - r_i)]), H
     H = np.zeros((3, 6))
     if kind == GPS:
         # h = p, H = [I 0]

@@ -1,9 +1,13 @@
 """Channel layout: which measurement each of a UAV's L channel slots carries.
 
-Per UAV the slots are, in order: anchors, peers (every other UAV, in index order),
-landmark slots (one per landmark), GPS. The layout is static per task; measurements that
-are absent in a step (out of range, lost, outside the topology) are masked, never
-dropped from the shape.
+Per UAV the slots are, in order: anchors (one range per anchor, or one range difference
+per TDOA pair), peers (every other UAV, in index order), landmark slots (one per
+landmark), GPS. The layout is static per task; measurements that are absent in a step
+(out of range, lost, outside the topology) are masked, never dropped from the shape.
+
+A TDOA channel refers to two anchors: its ``target`` is the pair code ``i·A + j`` (A the
+number of anchors) of the pair (i, j) it measures, z = ‖p − a_j‖ − ‖p − a_i‖
+(``tdoa_pair`` decodes it), so every kernel keeps one target index per channel.
 """
 
 from __future__ import annotations
@@ -14,11 +18,26 @@ import numpy as np
 
 from .specs import TaskSpec
 
-ANCHOR, PEER, LANDMARK, GPS, PEER_REL = 0, 1, 2, 3, 4
-KIND_NAMES = ("anchor", "peer", "landmark", "gps", "peer_rel")
-N_KINDS = len(KIND_NAMES)
+ANCHOR, PEER, LANDMARK, GPS, PEER_REL, TDOA = 0, 1, 2, 3, 4, 5
+KIND_NAMES = ("anchor", "peer", "landmark", "gps", "peer_rel", "tdoa")
+#: columns of the observation's kind one-hot (anchor, peer, landmark, gps, peer_rel): a TDOA
+#: channel shares the anchor column (an anchor-referenced scalar, ``OBS_KIND_COLUMN``), so the
+#: observation keeps its 11 features and every trained policy runs on TDOA tasks unchanged
+N_KINDS = 5
+#: one-hot column of each kind id
+OBS_KIND_COLUMN = np.array([0, 1, 2, 3, 4, 0], dtype=np.int64)
 #: scalar rows a channel of each kind contributes to the joint update
-KIND_DIM = np.array([1, 1, 3, 3, 3], dtype=np.int64)
+KIND_DIM = np.array([1, 1, 3, 3, 3, 1], dtype=np.int64)
+
+
+def tdoa_code(i: int, j: int, n_anchors: int) -> int:
+    """Target code of the TDOA pair (i, j): ``i·A + j``."""
+    return i * n_anchors + j
+
+
+def tdoa_pair(code: int, n_anchors: int) -> tuple[int, int]:
+    """The anchor pair (i, j) of a TDOA target code (z = ‖p − a_j‖ − ‖p − a_i‖)."""
+    return code // n_anchors, code % n_anchors
 
 
 @dataclass(frozen=True)
@@ -26,8 +45,9 @@ class ChannelLayout:
     """Static channel description of a task.
 
     Attributes:
-        kind: ``(N, L)`` channel kind ids (ANCHOR, PEER, LANDMARK, GPS, PEER_REL).
-        target: ``(N, L)`` anchor / UAV / landmark index the channel refers to (-1 for GPS).
+        kind: ``(N, L)`` channel kind ids (ANCHOR, PEER, LANDMARK, GPS, PEER_REL, TDOA).
+        target: ``(N, L)`` anchor / UAV / landmark index the channel refers to (-1 for GPS;
+            the pair code ``i·A + j`` for TDOA).
         linked: ``(N, L)`` whether the topology connects the slot at all.
         sigma: ``(N, L)`` nominal noise std per scalar row [m].
     """
@@ -68,9 +88,14 @@ def build_layout(spec: TaskSpec) -> ChannelLayout:
     peer_kind = PEER if s.peers.kind == "range" else PEER_REL
     for i in range(n):
         col = 0
-        for a in range(len(spec.anchors)):
-            kind[i, col], target[i, col], sigma[i, col] = ANCHOR, a, s.anchor_sigma
-            col += 1
+        if s.tdoa is None:
+            for a in range(len(spec.anchors)):
+                kind[i, col], target[i, col], sigma[i, col] = ANCHOR, a, s.anchor_sigma
+                col += 1
+        else:
+            for a, b in s.tdoa.pairs:
+                kind[i, col], target[i, col], sigma[i, col] = TDOA, tdoa_code(a, b, len(spec.anchors)), s.tdoa.sigma
+                col += 1
         if spec.n_peer_channels:
             for j in range(n):
                 if j == i:

@@ -19,19 +19,24 @@ RANGE_ROW_FLOPS = 135
 #: one row of a 3-vector channel (GPS, landmark, relative position): y (3), s (1),
 #: gain (2), x (12), P (63)
 VECTOR_ROW_FLOPS = 81
+#: one TDOA row: a range row whose model is two ranges, ‖p − a_j‖ − ‖p − a_i‖, and whose
+#: H is the difference of the two unit vectors: 2 × 12 + 4 in place of the range's 12
+TDOA_ROW_FLOPS = RANGE_ROW_FLOPS - 12 + 28
 
 
-def filter_flops(n_range_rows: np.ndarray, n_vector_rows: np.ndarray) -> np.ndarray:
+def filter_flops(n_range_rows: np.ndarray, n_vector_rows: np.ndarray, n_tdoa_rows: np.ndarray | int = 0) -> np.ndarray:
     """CEKF FLOPs per UAV-step from the active scalar rows.
 
     Args:
         n_range_rows: active range rows (anchor and peer channels), any shape.
         n_vector_rows: active rows of 3-vector channels (3 per channel), same shape.
+        n_tdoa_rows: active TDOA rows (one per channel), same shape (default none).
 
     Returns:
         FLOPs, same shape.
     """
-    return PREDICT_FLOPS + RANGE_ROW_FLOPS * np.asarray(n_range_rows) + VECTOR_ROW_FLOPS * np.asarray(n_vector_rows)
+    return (PREDICT_FLOPS + RANGE_ROW_FLOPS * np.asarray(n_range_rows) + VECTOR_ROW_FLOPS * np.asarray(n_vector_rows)
+            + TDOA_ROW_FLOPS * np.asarray(n_tdoa_rows))
 
 
 class ProcessorProfile(BaseModel):

@@ -4,7 +4,8 @@ Scheduled faults (fixed windows) and randomised ones (drawn from the counter-bas
 keyed by the episode seed) end up in the same flat arrays with a leading batch axis, so
 the world kernel has one code path. Windows are half-open in time: ``start <= t < end``.
 Continuous processes (Gauss–Markov NLOS, hybrid noise, packet loss) are parameters here
-and evolve inside the kernel.
+and evolve inside the kernel. On a TDOA task the anchor-targeted faults (uniform and
+Gauss–Markov NLOS, UWB outages) act on the TDOA channels, one per anchor pair.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .channels import ANCHOR, PEER, PEER_REL, ChannelLayout
+from .channels import ANCHOR, PEER, PEER_REL, TDOA, ChannelLayout
 from .rng import Stream, uniform
 from .specs import TaskSpec
 
@@ -132,7 +133,7 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
     if f.nlos_uniform is not None:
         nu = f.nlos_uniform
         eligible = np.zeros((n, n_l), dtype=np.bool_)
-        kinds = [ANCHOR] * ("anchor" in nu.targets) + [PEER, PEER_REL] * ("peer" in nu.targets)
+        kinds = [ANCHOR, TDOA] * ("anchor" in nu.targets) + [PEER, PEER_REL] * ("peer" in nu.targets)
         eligible[:] = np.isin(layout.kind, kinds) & layout.linked
         eligible &= _node_mask(nu.nodes, n)[:, None]
         for w, (t0, t1) in enumerate(nu.windows):
@@ -183,7 +184,7 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
     uwb_rows = []
     if f.uwb_outage is not None:
         out = f.uwb_outage
-        kinds = [ANCHOR] * ("anchor" in out.targets) + [PEER, PEER_REL] * ("peer" in out.targets)
+        kinds = [ANCHOR, TDOA] * ("anchor" in out.targets) + [PEER, PEER_REL] * ("peer" in out.targets)
         mask = np.isin(layout.kind, kinds) & _node_mask(out.nodes, n)[:, None]
         for t0, t1 in out.windows:
             uwb_rows.append((np.tile([t0, t1], (n_b, 1)), np.broadcast_to(mask, (n_b, n, n_l)).copy()))
@@ -199,7 +200,7 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
     gm_param = np.zeros(6)
     if f.nlos_gauss_markov is not None:
         g = f.nlos_gauss_markov
-        kinds = [ANCHOR] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
+        kinds = [ANCHOR, TDOA] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
         gm_mask = np.isin(layout.kind, kinds) & layout.linked & _node_mask(g.nodes, n)[:, None]
         gm_param = np.array([g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias])
 

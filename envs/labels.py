@@ -46,7 +46,7 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2, norm
 
-from .channels import ANCHOR, GPS, KIND_DIM, PEER, PEER_REL
+from .channels import ANCHOR, GPS, KIND_DIM, PEER, PEER_REL, TDOA
 
 #: k: a scalar channel-step (anchor or peer range) is labelled when its systematic error
 #: exceeds k·σ_eff (calibrated: docs/reproduce/labels.md)
@@ -102,7 +102,7 @@ def own_sigmas(ch: int, e0: float, e1: float, e2: float, sg: float) -> float:
         |e0| / σ for ranges, ‖e‖ / σ for GPS, 0 for landmarks and relative positions (their
         own error is nil; a relative position's error is its neighbour's, ``peer_rel_sigmas``).
     """
-    if ch == ANCHOR or ch == PEER:
+    if ch == ANCHOR or ch == PEER or ch == TDOA:
         return abs(e0) / sg
     if ch == GPS:
         return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / sg

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL
+from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
 
 
 def systematic_sigmas_reference(kind: np.ndarray, target: np.ndarray, sigma: np.ndarray, systematic: np.ndarray,
@@ -36,7 +36,7 @@ def systematic_sigmas_reference(kind: np.ndarray, target: np.ndarray, sigma: np.
     for i in range(n):
         for l in range(n_l):
             ch, j, sg = kind[i, l], target[i, l], sigma[i, l]
-            if ch == ANCHOR:
+            if ch == ANCHOR or ch == TDOA:
                 e, S = systematic[i, l, :1], np.array([[sg**2]])
             elif ch == GPS:
                 e, S = systematic[i, l], sg**2 * np.eye(3)
@@ -73,6 +73,6 @@ def own_labels_v1_reference(kind: np.ndarray, sigma: np.ndarray, systematic: np.
     Args:
         kind, sigma, threshold: ``(N, L)``; systematic ``(..., N, L, 3)``; valid ``(..., N, L)``.
     """
-    scalar = (kind == ANCHOR) | (kind == PEER)
+    scalar = (kind == ANCHOR) | (kind == PEER) | (kind == TDOA)
     size = np.where(scalar, np.abs(systematic[..., 0]), np.where(kind == GPS, np.linalg.norm(systematic, axis=-1), 0.0))
     return valid & (size / sigma > threshold)

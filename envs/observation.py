@@ -3,7 +3,9 @@
 Each channel gets F = 11 features, each in [0, 1]: innovation magnitude r, predicted
 distance d̂, previous applied trust, IMU jerk ‖u(k) − u(k−1)‖, normalised innovation
 squared, a one-hot of the channel kind (anchor, peer, landmark, gps, peer_rel) and the
-valid mask. Unbounded magnitudes are squashed with x / (x + s), a monotone map of
+valid mask. A TDOA channel (range difference of an anchor pair) sets the anchor column
+of the one-hot (``channels.OBS_KIND_COLUMN``), its d̂ is the predicted range difference
+|‖p⁻ − a_j‖ − ‖p⁻ − a_i‖|, and r and the NIS are those of the scalar row, as for a range. Unbounded magnitudes are squashed with x / (x + s), a monotone map of
 [0, ∞) onto [0, 1) whose scale s (below) sits at 0.5; ``unsquash`` inverts it.
 """
 
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import N_KINDS
+from .channels import N_KINDS, OBS_KIND_COLUMN
 from .core import CoreStep
 
 FEATURE_NAMES = (
@@ -35,8 +37,8 @@ def unsquash(y: np.ndarray, scale: float) -> np.ndarray:
 
 
 def kind_one_hot(kind: np.ndarray) -> np.ndarray:
-    """``(N, L)`` kind ids → ``(N, L, N_KINDS)`` float32 one-hot."""
-    return np.eye(N_KINDS, dtype=np.float32)[kind]
+    """``(N, L)`` kind ids → ``(N, L, N_KINDS)`` float32 one-hot (TDOA in the anchor column)."""
+    return np.eye(N_KINDS, dtype=np.float32)[OBS_KIND_COLUMN[kind]]
 
 
 def build_observation(step: CoreStep, one_hot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

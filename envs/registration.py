@@ -16,8 +16,13 @@ VECTOR_ENTRY_POINT = "swarmloc.envs.vector_env:SwarmLocVectorEnv"
 
 
 def class_name(task_id: str) -> str:
-    """``"swarmloc/NLOS-v0"`` → ``"NLOSEnv"`` (the task's class in ``task_envs``)."""
-    return task_id.removeprefix("swarmloc/").rsplit("-v", 1)[0] + "Env"
+    """The task's class in ``task_envs``: ``"swarmloc/NLOS-v0"`` → ``"NLOSEnv"``, ``"swarmloc/NLOS-v1"`` → ``"NLOSV1Env"``.
+
+    Versions after v0 carry their number, so two versions of one task never share a class
+    (or a docs page).
+    """
+    name, version = task_id.removeprefix("swarmloc/").rsplit("-v", 1)
+    return f"{name}Env" if version == "0" else f"{name}V{version}Env"
 
 
 def entry_point(task_id: str) -> str:

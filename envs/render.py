@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import ANCHOR, GPS, LANDMARK, ChannelLayout
+from .channels import ANCHOR, GPS, LANDMARK, TDOA, ChannelLayout, tdoa_pair
 
 #: frame size in pixels (width, height) of ``rgb_array`` renders
 FRAME_SIZE = (480, 480)
@@ -71,8 +71,11 @@ class TopDownRenderer:
             if kind == GPS:
                 rings.append((truth[i, :2], applied[i, l]))
                 continue
-            end = self.anchors[target] if kind == ANCHOR else self.landmarks[target] if kind == LANDMARK \
-                else truth[target]
+            if kind == TDOA:  # a range difference: drawn to the pair's second anchor (z = ‖p − a_j‖ − ‖p − a_i‖)
+                end = self.anchors[tdoa_pair(int(target), len(self.anchors))[1]]
+            else:
+                end = self.anchors[target] if kind == ANCHOR else self.landmarks[target] if kind == LANDMARK \
+                    else truth[target]
             segments.append((truth[i, :2], end[:2]))
             colours.append(cmap(float(applied[i, l])))
         if segments:

@@ -102,12 +102,22 @@ class RecordedFlight(Frozen):
     """
 
     kind: Literal["recorded"] = "recorded"
-    dataset: Literal["util-twr"] = Field(default="util-twr", description="imported data set folder")
+    dataset: Literal["util-twr", "util-tdoa"] = Field(
+        default="util-twr", description="imported data set folder: UTIL two-way ranging or TDOA flights")
     log: str = Field(default="twr-obs-log1", pattern=r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$", description="flight log")
     start: NonNegFloat = Field(default=9.15, description="log time of step 0 [s]")
     calibration: str | None = Field(
         default="log00", pattern=r"^[A-Za-z0-9_-][A-Za-z0-9._-]*$",
         description="log whose ranges against mocap give the per-anchor range bias; None = raw ranges")
+    anchors: str = Field(default="anchors.csv", pattern=r"^[A-Za-z0-9_-][A-Za-z0-9._-]*\.csv$",
+                         description="the data set's anchor file (anchor_id,x,y,z) the flight uses")
+
+    @model_validator(mode="after")
+    def _tdoa_has_no_calibration(self) -> "RecordedFlight":
+        if self.dataset == "util-tdoa" and self.calibration is not None:
+            raise ValueError(f"calibration={self.calibration!r}: the UTIL TDOA flights have no calibration log "
+                             "(use None)")
+        return self
 
 
 Trajectory = Annotated[
@@ -132,6 +142,41 @@ class PeerLinks(Frozen):
     max_range: PositiveFloat = 1e6
 
 
+class Tdoa(Frozen):
+    """UWB time difference of arrival (TDOA): the anchors broadcast, every UAV only listens.
+
+    Channel ``(i, j)`` of ``pairs`` measures the range difference
+    z = ‖p − a_j‖ − ‖p − a_i‖ + v, v ~ N(0, σ²) (the UTIL convention: i = idA, j = idB).
+    On a task with TDOA the anchors are transmitters only: they give no two-way ranges.
+    TDOA2 (the anchors in a ring, each pair of neighbours) is ``ring_pairs(A)``; TDOA3
+    (every pair) is ``all_pairs(A)``.
+    """
+
+    pairs: tuple[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]], ...] = Field(min_length=1)
+    sigma: PositiveFloat = Field(default=0.15, description="range-difference noise std [m]")
+
+    @model_validator(mode="after")
+    def _distinct(self) -> "Tdoa":
+        seen = set()
+        for i, j in self.pairs:
+            if i == j:
+                raise ValueError(f"TDOA pair ({i}, {j}) needs two different anchors")
+            if frozenset((i, j)) in seen:
+                raise ValueError(f"TDOA pair ({i}, {j}) appears twice (in either order)")
+            seen.add(frozenset((i, j)))
+        return self
+
+
+def ring_pairs(n_anchors: int) -> tuple[tuple[int, int], ...]:
+    """TDOA2 pairs: each anchor with the next one in the ring, ``(k, k + 1 mod A)``."""
+    return tuple((k, (k + 1) % n_anchors) for k in range(n_anchors))
+
+
+def all_pairs(n_anchors: int) -> tuple[tuple[int, int], ...]:
+    """TDOA3 pairs: every unordered pair ``(i, j)``, i < j (a reversed arrival is the same channel, negated)."""
+    return tuple((i, j) for i in range(n_anchors) for j in range(i + 1, n_anchors))
+
+
 class Sensors(Frozen):
     """Nominal sensor models (standard deviations are per axis / per range)."""
 
@@ -146,6 +191,8 @@ class Sensors(Frozen):
         default=None, description="visual odometry: world-frame velocity std per axis [m/s]; None = no VO")
     velocity_bias_sigma: NonNegFloat = Field(
         default=0.0, description="constant per-episode VO velocity bias std per axis [m/s] (drift)")
+    tdoa: Tdoa | None = Field(
+        default=None, description="UWB TDOA between anchor pairs instead of two-way anchor ranges; None = ranges")
 
 
 # --------------------------------------------------------------------------- faults
@@ -347,6 +394,15 @@ class TaskSpec(Frozen):
             bad = [i for i in nodes if not 0 <= i < n]
             if bad:
                 raise ValueError(f"{field} contains {bad}; UAV indices must be in [0, {n - 1}]")
+        tdoa = self.sensors.tdoa
+        if tdoa is not None:
+            bad = [p for p in tdoa.pairs if max(p) >= len(self.anchors)]
+            if bad:
+                raise ValueError(f"sensors.tdoa.pairs {bad} name anchors beyond the {len(self.anchors)} of the task")
+            if any(s.target == "anchor" for s in f.nlos_steps):
+                raise ValueError("faults.nlos_steps on an anchor of a TDOA task is not modelled (an anchor's delay "
+                                 "moves every pair it belongs to, with either sign); use nlos_gauss_markov or "
+                                 "nlos_uniform, which act per TDOA channel")
         for s in f.nlos_steps:
             limit = len(self.anchors) if s.target == "anchor" else n
             if s.index >= limit:
@@ -384,8 +440,13 @@ class TaskSpec(Frozen):
 
     @property
     def n_channels(self) -> int:
-        """Channels per UAV (L): anchors + peers + landmark slots + GPS."""
-        return len(self.anchors) + self.n_peer_channels + len(self.landmarks) + (1 if self.sensors.gps_sigma else 0)
+        """Channels per UAV (L): anchor ranges (or TDOA pairs) + peers + landmark slots + GPS."""
+        return self.n_anchor_channels + self.n_peer_channels + len(self.landmarks) + (1 if self.sensors.gps_sigma else 0)
+
+    @property
+    def n_anchor_channels(self) -> int:
+        """Anchor channels per UAV: one range per anchor, or one range difference per TDOA pair."""
+        return len(self.anchors) if self.sensors.tdoa is None else len(self.sensors.tdoa.pairs)
 
     @property
     def scored_nodes(self) -> tuple[int, ...]:

@@ -26,7 +26,7 @@ _FEATURE_ROWS = (
     ("trust applied to this channel at the previous update", "0", "1"),
     ("the UAV's IMU jerk ‖u(k) − u(k−1)‖, squashed j/(j+{s_j:g} m/s²)", "0", "1"),
     ("normalised innovation squared yᵀS⁻¹y (S with nominal R0), squashed ν/(ν+{s_n:g})", "0", "1"),
-    ("kind one-hot: anchor range", "0", "1"),
+    ("kind one-hot: anchor range, or TDOA range difference of an anchor pair", "0", "1"),
     ("kind one-hot: peer range", "0", "1"),
     ("kind one-hot: landmark (camera, 3-vector)", "0", "1"),
     ("kind one-hot: GPS fix (3-vector)", "0", "1"),
@@ -58,7 +58,9 @@ def _faults(spec: TaskSpec) -> list[str]:
         lines.append(f"NLOS step: +{s.bias:g} m on {s.target} {s.index} seen by {nodes}, {s.start:g}–{s.end:g} s.")
     if (g := f.nlos_gauss_markov) is not None:
         nodes = f"UAVs {list(g.nodes)}" if g.nodes else "every UAV"
-        lines.append(f"Random NLOS on {'/'.join(g.targets)} links of {nodes}: onset rate {g.onset_rate:g}/s, "
+        links = "/".join("TDOA pair (the second anchor delayed: +bias)" if t == "anchor" and spec.sensors.tdoa
+                         else t for t in g.targets)
+        lines.append(f"Random NLOS on {links} links of {nodes}: onset rate {g.onset_rate:g}/s, "
                      f"mean episode {g.mean_duration:g} s; bias Gauss–Markov around {g.mean_bias:g} m "
                      f"(σ {g.bias_sigma:g} m, τ {g.tau:g} s) clipped to [0, {g.max_bias:g}] m.")
     if (u := f.nlos_uniform) is not None:
@@ -91,7 +93,7 @@ def _faults(spec: TaskSpec) -> list[str]:
 _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cascades", "imu_cascade_random",
                      "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage"}
 _DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "peers", "camera_sigma", "camera_max_range",
-                      "gps_sigma", "velocity_sigma", "velocity_bias_sigma"}
+                      "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
 
 
 def _other_fields(model, described: set[str]) -> list[tuple[str, object]]:
@@ -113,8 +115,15 @@ def _measurement_model(spec: TaskSpec) -> str:
            + (f", constant bias σ {s.imu_bias_sigma:g} m/s²." if s.imu_bias_sigma else "."))
     lines = [f"- Truth: {truth}.", f"- IMU: {imu}"]
     if spec.anchors:
-        where = "surveyed positions read from the data set" if recorded else f"{list(spec.anchors)} m"
-        lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, range σ {s.anchor_sigma:g} m.")
+        where = (f"surveyed positions read from the data set (`{spec.trajectory.anchors}`)" if recorded
+                 else f"{list(spec.anchors)} m")
+        if s.tdoa is None:
+            lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, range σ {s.anchor_sigma:g} m.")
+        else:
+            pairs = ", ".join(f"({i}, {j})" for i, j in s.tdoa.pairs)
+            lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, transmitters only (TDOA: no two-way "
+                         f"ranging). Channel (i, j) measures z = ‖p − a_j‖ − ‖p − a_i‖ + v, σ {s.tdoa.sigma:g} m, "
+                         f"pairs {pairs}; H = u_j − u_i on the position (u_k the unit vector from anchor k).")
     if spec.n_peer_channels:
         kind = "range" if s.peers.kind == "range" else "relative position (3-vector)"
         lines.append(f"- Peers: UWB {kind} to other UAVs, topology `{s.peers.topology}`, σ {s.peers.sigma:g} m; "
@@ -138,12 +147,19 @@ def _measurement_model(spec: TaskSpec) -> str:
     fl = spec.filter
     lines.append(f"- Filter: one 6-state CEKF per UAV; a channel joins the joint update when α > α_th = "
                  f"{fl.alpha_th:g}, with R = R0 / max(α, {fl.alpha_min:g}).")
-    faults = ("Real, not injected: the recording's own NLOS and outliers (anchor 6 drifts like NLOS; sparse "
-              "spikes on anchors 1, 3, 7). A range is labelled faulty when it deviates from its anchor's median "
-              "residual against the truth by more than 3 robust spreads; "
-              + (f"the ranges are calibrated per anchor from log `{spec.trajectory.calibration}`."
-                 if spec.trajectory.calibration else "the ranges are raw (not calibrated).")
-              if recorded else " ".join(_faults(spec)))
+    if recorded and s.tdoa is not None:
+        faults = ("Real, not injected: the recording's own NLOS, outliers and dropouts. Range differences larger "
+                  "than their anchors' baseline are dropped; a step without an arrival masks the channel. A range "
+                  "difference is labelled faulty (labels v0) when its residual against the truth exceeds 3σ; the "
+                  "values are raw (no calibration: the per-pair offsets of 0.1–0.25 m stay).")
+    elif recorded:
+        faults = ("Real, not injected: the recording's own NLOS and outliers (anchor 6 drifts like NLOS; sparse "
+                  "spikes on anchors 1, 3, 7). A range is labelled faulty when it deviates from its anchor's median "
+                  "residual against the truth by more than 3 robust spreads; "
+                  + (f"the ranges are calibrated per anchor from log `{spec.trajectory.calibration}`."
+                     if spec.trajectory.calibration else "the ranges are raw (not calibrated)."))
+    else:
+        faults = " ".join(_faults(spec))
     lines.append("- Faults: " + faults)
     return "\n    ".join(lines)
 

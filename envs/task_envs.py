@@ -14,6 +14,16 @@ from .task_docs import task_doc
 from .tasks import CATALOGUE
 
 _V0 = ("v0: initial release (standard reward v0, processor profile stm32f427-cortex-m4f v0).",)
+#: the TDOA tasks start at v1 (they came with the TDOA channel kind, beside the frozen v0 tasks)
+_TDOA_V1 = ("v1: initial release, with the TDOA channel kind (standard reward v0, processor profile "
+            "stm32f427-cortex-m4f v0).",)
+#: Version History of the generated classes that are not plain v0 releases
+_HISTORY: dict[str, tuple[str, ...]] = {
+    "swarmloc/UTILFlight-v1": _V0 + ("v1: the anchors in the Vicon frame (the dataset's conversion of the survey, "
+                                     "anchors_vicon.csv) instead of the raw total-station coordinates, 5–11 cm "
+                                     "off; everything else as v0.",),
+    **{task_id: _TDOA_V1 for task_id in CATALOGUE if "Tdoa" in task_id or task_id == "swarmloc/TDOA-v1"},
+}
 
 
 class IdealEnv(SwarmLocEnv):
@@ -173,7 +183,7 @@ def generated_task_class(task_id: str) -> type[SwarmLocEnv]:
     factory = CATALOGUE[task_id]
     text = inspect.cleandoc(factory.__doc__ or f"the {task_id} task.")
     name = registration.class_name(task_id)
-    doc = task_doc(task_id, text[0].lower() + text[1:], _V0)
+    doc = task_doc(task_id, text[0].lower() + text[1:], _HISTORY.get(task_id, _V0))
     return type(name, (SwarmLocEnv,), {"__doc__": doc, "task_id": task_id, "__module__": __name__})
 
 

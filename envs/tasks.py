@@ -31,8 +31,11 @@ from .specs import (
     Scoring,
     Sensors,
     TaskSpec,
+    Tdoa,
     UwbOutage,
     VisionOutage,
+    all_pairs,
+    ring_pairs,
 )
 
 # six anchors around the accelerate-then-circle course (x ∈ [0, 29], y ∈ [0, 29] m)
@@ -199,6 +202,123 @@ def util_flight() -> TaskSpec:
     )
 
 
+def util_flight_vicon() -> TaskSpec:
+    """UTILFlight-v0's real flight ``twr-obs-log1`` with the anchors in the Vicon frame.
+
+    The same flight, window, calibration and noise settings as ``UTILFlight-v0`` (whose
+    Description has the numbers); only the anchor positions change: the dataset's own
+    conversion of the survey into the Vicon (mocap) frame (``anchors_vicon.csv``, the
+    util-twr README's addendum) instead of the raw total-station coordinates, which are
+    5–11 cm off. On this flight the per-anchor robust residual std is equal or slightly
+    lower with them (anchor 0: 0.042 → 0.039 m, 3: 0.123 → 0.115 m, 4: 0.077 → 0.073 m);
+    the log00 calibration is recomputed against the same anchors.
+    """
+    base = util_flight()
+    return TaskSpec.model_validate({**base.model_dump(), "version": 1, "trajectory": {
+        **base.trajectory.model_dump(), "anchors": "anchors_vicon.csv"}})
+
+
+#: the eight staged UTIL TDOA flights: task name → (flight folder, constellation, mode,
+#: log time of take-off [s], airborne duration [s]); the window is the README's airborne
+#: interval (mocap z > 0.3 m) on the 10 ms step grid, ``tdoa_flight.airborne_window``
+UTIL_TDOA_FLIGHTS: dict[str, tuple[str, str, str, float, float]] = {
+    "UTILC0425Tdoa2Los": ("c0425-tdoa2-traj2-los", "c0425", "TDOA2", 2.23, 32.46),
+    "UTILC0425Tdoa3Los": ("c0425-tdoa3-traj14-los", "c0425", "TDOA3", 2.24, 31.83),
+    "UTILC0426Tdoa2NoLabel": ("c0426-tdoa2-traj1-nolabel", "c0426", "TDOA2", 2.09, 52.06),
+    "UTILC0426Tdoa2Wood": ("c0426-tdoa2-traj3-wood", "c0426", "TDOA2", 2.12, 52.11),
+    "UTILC0426Tdoa2WoodCardPlasticMetal": ("c0426-tdoa2-traj11-wood-card-plastic-metal", "c0426", "TDOA2",
+                                           2.11, 52.61),
+    "UTILC0426Tdoa3NoObs": ("c0426-tdoa3-traj15-noobs", "c0426", "TDOA3", 4.36, 51.94),
+    "UTILC0426Tdoa3WoodCardPlasticMetal": ("c0426-tdoa3-traj13-wood-card-plastic-metal", "c0426", "TDOA3",
+                                           4.26, 52.93),
+    "UTILC0607Tdoa2WoodPlasticMetal": ("c0607-tdoa2-obs-log1-wood-plastic-metal", "c0607", "TDOA2", 6.74, 52.86),
+}
+#: range-difference σ per TDOA mode [m]: the median over anchor pairs of the per-pair robust
+#: std (1.4826·MAD of the residual against the truth) on the line-of-sight flights of the
+#: README: TDOA2 0.139 (c0425-traj2), 0.164 (c0426-traj1); TDOA3 0.178 (c0425-traj14),
+#: 0.205 (c0426-traj15)
+UTIL_TDOA_SIGMA = {"TDOA2": 0.15, "TDOA3": 0.20}
+#: process-model IMU σ per session [m/s²], measured as for UTILFlight-v0: integrating the
+#: AHRS world acceleration for 1 s from the true velocity leaves a horizontal velocity error
+#: of std e, which white noise at 10 ms steps matches with σ = e / √(1 s · 10 ms) = 10·e.
+#: c0607 (the Bolt): e = 0.13–0.16 m/s; c0426: 0.20–0.30 m/s; c0425: 0.41–1.29 m/s (its
+#: logged gyro z reads −0.06 … −0.09 rad/s at rest and its accelerometer 3.7° off level:
+#: the AHRS tilt is 7–10° off in flight, a horizontal bias of 1.2–1.9 m/s² in x)
+UTIL_TDOA_IMU_SIGMA = {"c0425": 10.0, "c0426": 2.5, "c0607": 1.5}
+
+
+def util_tdoa(name: str) -> Callable[[], TaskSpec]:
+    flight, constellation, mode, start, duration = UTIL_TDOA_FLIGHTS[name]
+
+    def make() -> TaskSpec:
+        pairs = ring_pairs(8) if mode == "TDOA2" else all_pairs(8)
+        return TaskSpec(
+            name=name, version=1, n_uav=1, dt=0.01, duration=duration,
+            trajectory=RecordedFlight(dataset="util-tdoa", log=flight, start=start, calibration=None,
+                                      anchors=f"anchors_{constellation}.csv"),
+            anchors=((0.0, 0.0, 0.0),) * 8,
+            sensors=Sensors(imu_sigma=UTIL_TDOA_IMU_SIGMA[constellation], peers=PeerLinks(kind="none"),
+                            tdoa=Tdoa(pairs=pairs, sigma=UTIL_TDOA_SIGMA[mode])),
+            filter=FilterSettings(init_pos_sigma=0.1, init_vel_sigma=0.1),
+        )
+
+    obstacles = {"Los": "none (line of sight)", "NoLabel": "none listed (presumably line of sight)",
+                 "NoObs": "none (\"no-obstacle\")", "Wood": "a wood shelf",
+                 "WoodCardPlasticMetal": "a wood shelf, a cardboard box, a plastic box and a metal box",
+                 "WoodPlasticMetal": "a wood shelf, a plastic box and a metal box"}[name.split(mode.title())[1]]
+    path = ("a manually flown path (not a scripted circle)" if constellation == "c0607"
+            else "the commanded circle r 1.5 m, ω 0.6 rad/s, z 1.5 m")
+    make.__doc__ = f"""The UTIL dataset's real {mode} flight ``{flight}``, replayed: constellation {constellation}, obstacles {obstacles}.
+
+    The UTIL data set [util] (docs/references.md) is not shipped; this repository's README
+    says how to import it (``swarmloc data import-util-tdoa``). One Crazyflie flies
+    {path}; eight UWB anchors broadcast and the tag only listens: {mode}
+    ({"each anchor with the next one in the ring, 8 pairs" if mode == "TDOA2"
+      else "every pair, 28 channels, either order of arrival"}); IMU at 1 kHz, Vicon truth.
+    Scored from take-off (log time {start:g} s) to landing ({start + duration:.2f} s): the
+    airborne window (mocap z > 0.3 m), on the floor the range differences are metres off.
+    The filtering rules (impossible values dropped, dropouts masked) are those of
+    ``swarmloc.envs.recorded.tdoa_flight``. Noise settings are measured, not fitted to a
+    score: range-difference σ {UTIL_TDOA_SIGMA[mode]:g} m (the median per-pair robust std
+    of the line-of-sight {mode} flights); IMU σ {UTIL_TDOA_IMU_SIGMA[constellation]:g} m/s²
+    (the 1 s velocity error of the AHRS world acceleration on the {constellation} flights,
+    ``tasks.UTIL_TDOA_IMU_SIGMA``); the take-off pad is known to 0.1 m and the vehicle is
+    still at take-off (0.1 m/s).
+    """
+    return make
+
+
+def tdoa() -> TaskSpec:
+    """A simulated UWB TDOA room like the UTIL flights' (tags only listen), with random NLOS.
+
+    Four UAVs circle (r 1.0–2.5 m, ω 0.6 rad/s, 1.5 ± 0.2 m high: the UTIL commanded
+    circle) inside an 8 × 8 × 3 m room with eight anchors, four on the floor (0.2 m) and
+    four on the ceiling (3.0 m), alternating around the walls, and fuse TDOA2: each anchor
+    with the next one in the ring, 8 range differences per UAV, no two-way ranging. The
+    numbers follow the UTIL TDOA flights' README: range-difference σ 0.15 m (the median
+    per-pair robust std on line-of-sight TDOA2 flights); each arrival lost with probability
+    0.5 (TDOA2 delivers 280–430 Hz over 8 pairs, ≈ 50 Hz per pair at 100 Hz steps); NLOS
+    episodes per pair (onset 0.03/s, mean 5 s, bias around 0.8 m, σ 0.5 m, clipped to
+    [0, 3] m: the metal-obstacle pairs' median residuals −0.43 … +0.48 m with robust std
+    1.2–1.7 m, and 8–25 % of the samples beyond 0.5 m); IMU σ 1.5 m/s² with a constant bias
+    of σ 0.1 m/s² (the AHRS acceleration error of the Bolt flights). A training ground for
+    methods meant for the real TDOA flights.
+    """
+    return TaskSpec(
+        name="TDOA", version=1, n_uav=4, dt=0.01, duration=50.0,
+        trajectory=PhasedCircles(center=(0.0, 0.0, 1.5), radius=1.0, omega=0.6, phase_step=math.pi / 2,
+                                 z_amplitude=0.2, z_omega=0.3, radius_step=0.5),
+        anchors=((-4.0, -4.0, 0.2), (0.0, -4.0, 3.0), (4.0, -4.0, 0.2), (4.0, 0.0, 3.0),
+                 (4.0, 4.0, 0.2), (0.0, 4.0, 3.0), (-4.0, 4.0, 0.2), (-4.0, 0.0, 3.0)),
+        sensors=Sensors(imu_sigma=1.5, imu_bias_sigma=0.1, peers=PeerLinks(kind="none"),
+                        tdoa=Tdoa(pairs=ring_pairs(8), sigma=0.15)),
+        faults=Faults(packet_loss=0.5,
+                      nlos_gauss_markov=NlosGaussMarkov(targets=("anchor",), onset_rate=0.03, mean_duration=5.0,
+                                                        mean_bias=0.8, bias_sigma=0.5, tau=2.0, max_bias=3.0)),
+        filter=FilterSettings(init_pos_sigma=0.1, init_vel_sigma=0.1),
+    )
+
+
 def anchor_free() -> TaskSpec:
     """Anchor-free swarm with inter-UAV UWB and landmark-free visual odometry (dtvirm §3.3, §4.2–4.4).
 
@@ -240,6 +360,9 @@ CATALOGUE: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/GradualFault-v0": gradual_fault,
     "swarmloc/AnchorFree-v0": anchor_free,
     "swarmloc/UTILFlight-v0": util_flight,
+    "swarmloc/UTILFlight-v1": util_flight_vicon,
+    "swarmloc/TDOA-v1": tdoa,
+    **{f"swarmloc/{name}-v1": util_tdoa(name) for name in UTIL_TDOA_FLIGHTS},
 }
 
 

@@ -8,7 +8,10 @@ core calls it inside its own step kernel), ``sense_batch`` the whole batch, and
 biases, Gauss–Markov NLOS, IMU cascades, camera and UWB outages, GPS drift, hybrid GPS
 noise, packet loss; visual odometry is sensed beside the truth. All draws come from the
 counter-based RNG (``rng.py``) keyed by (seed, step, stream, index), so the numbers do not
-depend on the batch, the thread or the order of evaluation.
+depend on the batch, the thread or the order of evaluation. A TDOA channel senses the range
+difference of its anchor pair with the anchor ranges' noise stream; its NLOS bias (scheduled
+windows and Gauss–Markov episodes act per channel, as on a range) delays the pair's second
+anchor, so it adds to the range difference.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .channels import ANCHOR, LANDMARK, PEER, PEER_REL
+from .channels import ANCHOR, LANDMARK, PEER, PEER_REL, TDOA
 from .faults import BIAS_UNIFORM, FaultSchedule
 from .labels import own_sigmas
 from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
@@ -113,6 +116,16 @@ def _imu_faulty(imu_time: np.ndarray, imu_nodes: np.ndarray, b: int, j: int, t: 
         if imu_nodes[b, wi, j] and _inside(t, imu_time[b, wi, 0], imu_time[b, wi, 1]):
             return True
     return False
+
+
+@njit(cache=True, inline="always")
+def _range_difference(pos: np.ndarray, anchors: np.ndarray, b: int, i: int, code: int) -> float:
+    """‖p − a_j‖ − ‖p − a_i‖ of UAV i of episode b for the TDOA pair code ``i·A + j`` (``channels.tdoa_pair``)."""
+    n_a = anchors.shape[0]
+    ia, ib = code // n_a, code % n_a
+    e0, e1, e2 = pos[b, i, 0] - anchors[ib, 0], pos[b, i, 1] - anchors[ib, 1], pos[b, i, 2] - anchors[ib, 2]
+    f0, f1, f2 = pos[b, i, 0] - anchors[ia, 0], pos[b, i, 1] - anchors[ia, 1], pos[b, i, 2] - anchors[ia, 2]
+    return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) - math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
 
 
 #: below this batch size the kernels run on the calling thread: a parallel region over a
@@ -224,16 +237,20 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                 ok = linked[i, l]
                 err = 0.0
                 lab = False
-                if ch == ANCHOR or ch == PEER:
-                    if ch == ANCHOR:
-                        dx = pos[b, i, 0] - anchors[j, 0]
-                        dy = pos[b, i, 1] - anchors[j, 1]
-                        dz = pos[b, i, 2] - anchors[j, 2]
+                if ch == ANCHOR or ch == PEER or ch == TDOA:
+                    if ch == TDOA:
+                        # range difference of the pair (j // A, j % A); a fault delays the second anchor
+                        rng = _range_difference(pos, anchors, b, i, j)
                     else:
-                        dx = pos[b, i, 0] - pos[b, j, 0]
-                        dy = pos[b, i, 1] - pos[b, j, 1]
-                        dz = pos[b, i, 2] - pos[b, j, 2]
-                    rng = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        if ch == ANCHOR:
+                            dx = pos[b, i, 0] - anchors[j, 0]
+                            dy = pos[b, i, 1] - anchors[j, 1]
+                            dz = pos[b, i, 2] - anchors[j, 2]
+                        else:
+                            dx = pos[b, i, 0] - pos[b, j, 0]
+                            dy = pos[b, i, 1] - pos[b, j, 1]
+                            dz = pos[b, i, 2] - pos[b, j, 2]
+                        rng = math.sqrt(dx * dx + dy * dy + dz * dz)
                     if ch == PEER and rng > w.peer_range:
                         ok = False
                     # scheduled / uniform NLOS windows
@@ -260,7 +277,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             gm_left[b, i, l] -= 1.0
                         if gm_left[b, i, l] > 0.0:
                             err += gm_bias[b, i, l]
-                    z[b, i, l, 0] = rng + err + sg * normal_at(key_anchor if ch == ANCHOR else key_peer, idx)
+                    z[b, i, l, 0] = rng + err + sg * normal_at(key_peer if ch == PEER else key_anchor, idx)
                     z[b, i, l, 1] = 0.0
                     z[b, i, l, 2] = 0.0
                     systematic[b, i, l, 0] = err

@@ -62,18 +62,9 @@ def data_missing(spec: TaskSpec, data_dir: str | Path | None = None) -> str | No
     """
     if not is_recorded(spec):
         return None
-    from .recorded.util_import import IMPORT_COMMAND, UTIL_SOURCE, find_util_data
+    from .recorded.flights import flight_data_missing
 
-    try:
-        folder = find_util_data(data_dir)
-    except FileNotFoundError as exc:
-        return str(exc)
-    flight = spec.trajectory
-    for log in (flight.log, flight.calibration):
-        if log is not None and not (folder / log).is_dir():
-            return (f"UTIL TWR log {log!r} is missing from {folder}.\nThe data comes from {UTIL_SOURCE}\n"
-                    f"Import it with `{IMPORT_COMMAND}` using DIR = {folder}.")
-    return None
+    return flight_data_missing(spec, data_dir)
 
 
 __all__ = ["AnyWorld", "data_missing", "is_recorded", "make_world"]

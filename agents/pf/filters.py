@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from swarmloc.agents.protocols import EstimatorOutput, Measurements, PrivilegedInfo, TaskFacts
-from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL
+from swarmloc.agents.protocols import EstimatorOutput, Measurements, PrivilegedInfo, TaskFacts, UnsupportedTask
+from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
 from swarmloc.envs.rng import uniform
 
 from . import core
@@ -164,6 +164,9 @@ class ParticleFilter:
             raise ValueError(f"x0 must have shape ({n_b}, {n}, 6), got {x0.shape}")
         if not np.isfinite(x0).all():
             raise ValueError("x0 holds non-finite values")
+        if (np.asarray(facts.kind) == TDOA).any():
+            raise UnsupportedTask("the particle filters weigh anchor and peer ranges, landmarks, GPS and relative "
+                                  "positions; they do not model TDOA range differences")
         c = self.config
         m = c.n_max
         hidden = self.network.hidden if self.network is not None else 1

@@ -62,6 +62,7 @@ COMMANDS: CommandTable = {
     },
     "data": {
         "import-util": "swarmloc.bench.cli.data_import_util",
+        "import-util-tdoa": "swarmloc.bench.cli.data_import_util_tdoa",
     },
 }
 

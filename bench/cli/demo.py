@@ -19,7 +19,7 @@ class Options:
     """Every shipped method on the quick suite: comparison table and plots, then the leaderboard."""
 
     out: Path = Path("swarmloc-demo")
-    """Output folder (results/, plots/, summary.md; the real flight's in real-v0/; the leaderboard site in leaderboard/)."""
+    """Output folder (results/, plots/, summary.md; the real flights' in real-v1/; the leaderboard site in leaderboard/)."""
     suite: str = "quick"
     """Suite to run."""
     workers: int = 2
@@ -57,8 +57,8 @@ def run(opts: Options) -> int:
         return 2
     where = {"backend": backend, "address": opts.address}
     run_demo(methods, get_suite(opts.suite), opts.out, workers=opts.workers, plots=opts.plots, **where)
-    if opts.suite == "quick":  # the real flight joins the demo wherever its data is imported
-        run_real_flight_demo(methods, opts.out / "real-v0", workers=opts.workers, plots=opts.plots, **where)
+    if opts.suite == "quick":  # the real flights join the demo wherever their data is imported
+        run_real_flight_demo(methods, opts.out / REAL_SUITE, workers=opts.workers, plots=opts.plots, **where)
     if opts.leaderboard:
         # the CLI is every room's front door: only its handlers reach the leaderboard
         from swarmloc.leaderboard.shipped import show_leaderboard
@@ -67,24 +67,32 @@ def run(opts: Options) -> int:
     return 0
 
 
+#: the real-flight suite the demo adds to the quick suite where its data is imported
+REAL_SUITE = "real-v1"
+
+
 def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: bool, backend: str | None = None,
-                         address: str | None = None) -> bool:
-    """The demo on suite ``real-v0`` if its data is here; otherwise print why it is skipped.
+                         address: str | None = None, suite_name: str = REAL_SUITE) -> bool:
+    """The demo on the real-flight suite (``real-v1``) if its data is here; otherwise say why and where it comes from.
 
     Returns:
         Whether it ran.
     """
     from rich.console import Console
+    from rich.markup import escape
 
     from swarmloc.bench.evaluation.demo import run_demo
     from swarmloc.bench.evaluation.suites import get_suite, missing_data
 
-    suite = get_suite("real-v0")
+    suite = get_suite(suite_name)
     missing = missing_data(suite)
     if missing:
-        why = next(iter(missing.values())).splitlines()[0]
-        Console().print(f"[yellow]skipping suite real-v0 (real UTIL flight):[/yellow] {why} "
-                        "Import it with `swarmloc data import-util` (see `swarmloc evaluate --suite real-v0`).")
+        lines = next(iter(missing.values())).splitlines()
+        why, source = lines[0], next((ln for ln in lines if ln.startswith("The data comes from")), "")
+        Console().print(f"[yellow]skipping suite {suite_name} (real UTIL flights, {len(missing)} of "
+                        f"{len(suite.tasks)} tasks without data):[/yellow] {escape(why)} {escape(source)} Import "
+                        "them with `swarmloc data import-util` and `swarmloc data import-util-tdoa` (see README, "
+                        f"'Real flights').")
         return False
     run_demo(methods, suite, out, workers=workers, plots=plots, backend=backend, address=address)
     return True

@@ -19,7 +19,7 @@ class Options:
     out: Path
     """Results file to write (JSON); per-step traces of the first seeds go to `<stem>.traces.npz` beside it."""
     suite: str = "quick"
-    """Suite: `quick`, `standard-v0`, `dev` or `real-v0` (real flights; needs the imported data)."""
+    """Suite: `quick`, `standard-v0`, `dev`, `real-v0` or `real-v1` (real flights; need the imported data)."""
     tasks: str | None = None
     """Only these tasks of the suite, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
     workers: int = 1
@@ -31,6 +31,9 @@ class Options:
     address: str | None = None
     """With `--backend ray`: the cluster to join, `auto` (the one `ray start` runs on this node) or `HOST:PORT`.
     Default: $RAY_ADDRESS, else a local cluster of `--workers` CPUs."""
+    seeds_per_job: int | None = None
+    """Split each task's seeds into jobs of this many (more jobs than tasks for a big cluster). Default: one job
+    per task. Methods whose numbers depend on the batch size (mappo, by ~1e-9) reproduce only at equal splits."""
     weights: Path | None = None
     """Weights file handed to the method's factory as `weights=`."""
     progress: bool = True
@@ -65,7 +68,8 @@ def run(opts: Options) -> int:
     started = time.perf_counter()
     try:
         results = evaluate(opts.method, suite, opts.out, workers=opts.workers, backend=backend, address=opts.address,
-                           weights=str(opts.weights) if opts.weights else None, progress=opts.progress)
+                           seeds_per_job=opts.seeds_per_job, weights=str(opts.weights) if opts.weights else None,
+                           progress=opts.progress)
     except EvaluationFailed as err:
         console.print(f"[red]error:[/red] {escape(str(err))}")
         return 1

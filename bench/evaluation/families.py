@@ -8,7 +8,8 @@ swarm size or a contamination percentage), which leaves the task's *base* name::
     swarmloc/CascadedFaultRandom-v0 → CascadedFault  swarmloc/NLOSStep-v0 → NLOSStep
 
 ``FAMILY_OF_BASE`` then names the family of each base (NLOS and NLOSStep are one family,
-VisionLoss and Indoor are the pf-nn scenarios, UTILFlight is the real flight data). A base
+VisionLoss and Indoor are the pf-nn scenarios, UTILFlight and the UTIL TDOA flights are the real
+flight data, TDOA the simulated TDOA room). A base
 missing from the table is a family of its own, so a new task never disappears from a view.
 This module is the one place that defines families; everything that groups tasks imports it.
 """
@@ -33,11 +34,17 @@ FAMILY_OF_BASE: dict[str, str] = {
     "GradualFault": "Gradual",
     "AnchorFree": "AnchorFree",
     "UTILFlight": "Real",
+    "TDOA": "TDOA",
+    # the real UTIL TDOA flights (``tasks.UTIL_TDOA_FLIGHTS``)
+    **{base: "Real" for base in (
+        "UTILC0425Tdoa2Los", "UTILC0425Tdoa3Los", "UTILC0426Tdoa2NoLabel", "UTILC0426Tdoa2Wood",
+        "UTILC0426Tdoa2WoodCardPlasticMetal", "UTILC0426Tdoa3NoObs", "UTILC0426Tdoa3WoodCardPlasticMetal",
+        "UTILC0607Tdoa2WoodPlasticMetal")},
 }
 
 #: display order of the families (one not listed here comes after these, in order of appearance)
 FAMILY_ORDER: tuple[str, ...] = (
-    "Ideal", "NLOS", "Scale", "Cascaded", "Vision", "Hybrid", "Gradual", "AnchorFree", "Real",
+    "Ideal", "NLOS", "Scale", "Cascaded", "Vision", "Hybrid", "Gradual", "AnchorFree", "TDOA", "Real",
 )
 
 _VERSION = re.compile(r"-v\d+$")

@@ -21,6 +21,12 @@ use dev seeds, never test seeds. Suites:
   imported (``SWARMLOC_DATA``); :func:`require_data` says what is missing and how to
   import it.
 
+* ``real-v1`` — the real flights of v1 (:data:`REAL_V1_TASKS`): ``UTILFlight-v1`` (the TWR
+  flight with Vicon-frame anchors) and the eight UTIL TDOA flights (TDOA2 and TDOA3, line of
+  sight and NLOS with wood, cardboard, plastic and metal obstacles), 4 test seeds each; it
+  needs the imported ``util-twr`` and ``util-tdoa`` data (``swarmloc data import-util``,
+  ``swarmloc data import-util-tdoa``).
+
 Tasks that replay recorded flights (trajectory kind ``recorded``) need a data set the
 repository does not ship, so the catalogue-wide suites leave them out.
 
@@ -129,7 +135,28 @@ def _real_v0() -> Suite:
                  "real flights replayed from imported data (UTIL twr-obs-log1) × 4 test seeds; needs SWARMLOC_DATA")
 
 
-SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0}
+#: the tasks of ``real-v1`` (frozen with the suite): the TWR flight with Vicon-frame anchors and
+#: the eight UTIL TDOA flights (``tasks.UTIL_TDOA_FLIGHTS``)
+REAL_V1_TASKS: tuple[str, ...] = (
+    "swarmloc/UTILFlight-v1",
+    "swarmloc/UTILC0425Tdoa2Los-v1",
+    "swarmloc/UTILC0425Tdoa3Los-v1",
+    "swarmloc/UTILC0426Tdoa2NoLabel-v1",
+    "swarmloc/UTILC0426Tdoa2Wood-v1",
+    "swarmloc/UTILC0426Tdoa2WoodCardPlasticMetal-v1",
+    "swarmloc/UTILC0426Tdoa3NoObs-v1",
+    "swarmloc/UTILC0426Tdoa3WoodCardPlasticMetal-v1",
+    "swarmloc/UTILC0607Tdoa2WoodPlasticMetal-v1",
+)
+
+
+def _real_v1() -> Suite:
+    return Suite("real-v1", "1", _episodes(REAL_V1_TASKS, TEST_SEED_START, 4),
+                 "real UTIL flights (TWR with Vicon-frame anchors, 8 TDOA flights) × 4 test seeds; "
+                 "needs SWARMLOC_DATA")
+
+
+SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0, "real-v1": _real_v1}
 
 
 def missing_data(suite: Suite) -> dict[str, str]:

@@ -7,7 +7,7 @@ mask)``, ``sense()`` — so the CEKF backbone and every estimator run on real da
 unchanged. The spec's trajectory is a ``RecordedFlight`` (which log, where step 0 is,
 which calibration); ``util_flight`` holds the rules that turn the log into steps.
 
-* **Anchors** come from the data folder (``anchors.csv``), never from the spec: the data
+* **Anchors** come from the data folder (the flight's anchor file), never from the spec: the data
   set has no licence, so the repository does not embed its survey. The spec holds one
   placeholder per anchor (at the origin) so that the channel layout (L = 8) is known
   without the data; ``world.anchors`` holds the surveyed positions.
@@ -38,8 +38,8 @@ from ..labels import label_thresholds
 from ..rng import Stream, normal
 from ..specs import RecordedFlight, TaskSpec
 from ..world import SenseBuffers, reset_indices
-from .util_flight import Recording, load_recording
-from .util_import import find_util_data
+from .flights import load_flight
+from .util_flight import Recording
 
 _INIT = int(Stream.INIT)
 
@@ -51,7 +51,7 @@ class RecordedWorld:
         spec: a task whose trajectory is a ``RecordedFlight``.
         batch_size: B.
         data_dir: the folder that contains ``util-twr/`` (default: ``$SWARMLOC_DATA``, else
-            ``../shared/data`` beside the checkout; see ``find_util_data``).
+            ``../shared/data`` beside the checkout; see ``util_import.data_root``).
 
     Raises:
         ValueError: the spec is not a recorded flight, has several UAVs, landmarks, peers
@@ -73,12 +73,12 @@ class RecordedWorld:
                              f"n_uav={spec.n_uav}, {len(spec.landmarks)} landmarks, "
                              f"{len(spec.sensors.gps_sigma)} GPS, {spec.n_peer_channels} peer channels, "
                              f"VO velocity σ {spec.sensors.velocity_sigma}")
-        folder = find_util_data(data_dir)
-        self.recording: Recording = load_recording(folder, flight.log, float(flight.start), spec.n_steps,
-                                                   float(spec.dt), flight.calibration)
+        # the loader of the flight's data set (``flights.py``): TWR ranges or TDOA pairs
+        folder, recording = load_flight(spec, data_dir)
+        self.recording: Recording = recording
         n_a = len(self.recording.anchors)
         if len(spec.anchors) != n_a:
-            raise ValueError(f"{spec.task_id} has {len(spec.anchors)} anchor channels but {folder / 'anchors.csv'} "
+            raise ValueError(f"{spec.task_id} has {len(spec.anchors)} anchors but {folder / flight.anchors} "
                              f"surveys {n_a} anchors")
         self.spec = spec
         self.batch_size = batch_size
@@ -86,7 +86,7 @@ class RecordedWorld:
         self.layout: ChannelLayout = build_layout(spec)
         self.anchors = np.array(self.recording.anchors)
         self.landmarks = np.zeros((0, 3))
-        n_b, n, n_l = batch_size, 1, n_a
+        n_b, n, n_l = batch_size, 1, spec.n_channels
         self.buffers = SenseBuffers(
             pos=np.zeros((n_b, n, 3)), vel=np.zeros((n_b, n, 3)), imu=np.zeros((n_b, n, 3)),
             z=np.zeros((n_b, n, n_l, 3)), valid=np.zeros((n_b, n, n_l), dtype=np.bool_),

@@ -119,12 +119,20 @@ def _read_only(*arrays: np.ndarray) -> None:
         a.flags.writeable = False
 
 
-def read_anchors(folder: Path) -> np.ndarray:
-    """``(A, 3)`` anchor positions from ``<folder>/anchors.csv`` (rows ordered by id)."""
-    table = np.loadtxt(folder / "anchors.csv", delimiter=",", skiprows=1, ndmin=2)
+def read_anchors(folder: Path, file_name: str = "anchors.csv") -> np.ndarray:
+    """``(A, 3)`` anchor positions from ``<folder>/<file_name>`` (rows ordered by id).
+
+    Raises:
+        FileNotFoundError: the file is missing (the message names it).
+        ValueError: the ids are not 0..A-1 in order.
+    """
+    path = folder / file_name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing; the data set's README says where its anchor files come from")
+    table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     ids = table[:, 0].astype(int)
     if not np.array_equal(ids, np.arange(len(ids))):
-        raise ValueError(f"{folder / 'anchors.csv'}: anchor ids {ids.tolist()} must be 0..A-1 in order")
+        raise ValueError(f"{path}: anchor ids {ids.tolist()} must be 0..A-1 in order")
     return np.ascontiguousarray(table[:, 1:4])
 
 
@@ -270,7 +278,7 @@ def airborne_window(mocap: np.ndarray, margin: float = TAKEOFF_MARGIN) -> tuple[
 
 @functools.lru_cache(maxsize=4)
 def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float,
-                   calibration: str | None) -> Recording:
+                   calibration: str | None, anchors_file: str = "anchors.csv") -> Recording:
     """Resample one imported log onto filter steps (cached per argument tuple).
 
     Args:
@@ -280,6 +288,8 @@ def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float
         n_steps: T, the number of steps after step 0.
         dt: filter step [s].
         calibration: the log that calibrates the range bias, or None for raw ranges.
+        anchors_file: the anchor file in ``folder`` (``anchors.csv``: the raw total-station
+            survey; ``anchors_vicon.csv``: the dataset's own conversion to the Vicon frame).
 
     Returns:
         The ``Recording`` (see the module docstring for every rule).
@@ -289,7 +299,7 @@ def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float
         ValueError: the window does not fit inside the log's IMU and mocap, or a range
             names an anchor that is not surveyed.
     """
-    anchors = read_anchors(folder)
+    anchors = read_anchors(folder, anchors_file)
     data = read_flight_log(_log_dir(folder, log))
     t = start + dt * np.arange(n_steps + 1)
     lo = max(data.imu[0, 0], data.mocap[0, 0]) + dt

@@ -36,6 +36,7 @@ __all__ = [
     "UTIL_SOURCE",
     "Table",
     "UtilImportError",
+    "data_root",
     "find_util_data",
     "import_util",
     "main_import_util",
@@ -352,6 +353,23 @@ def _write_gzip_text(path: Path, text: str) -> None:
         gz.write(text.encode("ascii"))
 
 
+def data_root(data_dir: str | Path | None = None) -> tuple[Path, str]:
+    """The folder that holds the imported data sets, and where that choice came from.
+
+    In order: ``data_dir``; else the environment variable ``SWARMLOC_DATA``; else
+    ``../shared/data`` next to this checkout (a convenience for the project's own tests).
+
+    Returns:
+        ``(folder, origin)``: origin names the rule that chose it (for error messages).
+    """
+    if data_dir is not None:
+        return Path(data_dir), "the data_dir argument"
+    if os.environ.get(DATA_ENV_VAR):
+        return Path(os.environ[DATA_ENV_VAR]), f"${DATA_ENV_VAR}"
+    repo_root = Path(__file__).resolve().parents[2]
+    return repo_root.parent / "shared" / "data", "the default next to the checkout"
+
+
 def find_util_data(data_dir: str | Path | None = None) -> Path:
     """Locate the imported UTIL TWR dataset folder (``.../util-twr``).
 
@@ -369,13 +387,7 @@ def find_util_data(data_dir: str | Path | None = None) -> Path:
         FileNotFoundError: the folder does not exist; the message says where the data
             comes from and which command imports it.
     """
-    if data_dir is not None:
-        base, origin = Path(data_dir), "the data_dir argument"
-    elif os.environ.get(DATA_ENV_VAR):
-        base, origin = Path(os.environ[DATA_ENV_VAR]), f"${DATA_ENV_VAR}"
-    else:
-        repo_root = Path(__file__).resolve().parents[2]
-        base, origin = repo_root.parent / "shared" / "data", "the default next to the checkout"
+    base, origin = data_root(data_dir)
     folder = base / DATASET_DIR
     if not folder.is_dir():
         raise FileNotFoundError(
