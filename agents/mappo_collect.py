@@ -69,7 +69,7 @@ class TaskPlan:
         run_seed: the run's seed.
         task_index: the task's place in the mixture.
         num_envs: B, the task's episodes per batch (all workers together).
-        n_steps: episode length [steps].
+        n_steps: episode length, in steps.
         rollout_steps: steps per batch (divides ``n_steps``).
         offset: this worker's first episode among the B (0 in this process).
         threads: torch and numba threads of a worker.

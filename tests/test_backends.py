@@ -6,6 +6,7 @@ with spec overrides so that the module runs in about a minute.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
@@ -29,6 +30,10 @@ from swarmloc.bench.evaluation.backends import (
 )
 from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate, evaluate_methods, partial_path
 from swarmloc.bench.evaluation.suites import Suite
+from swarmloc.leaderboard.errors import VerificationFailed
+from swarmloc.leaderboard.ray_rerun import ray_rerun, split_sample
+from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.submit import submit
 
 TESTS = Path(__file__).resolve().parent
 FAULTS = TESTS / "backend_faults.py"
@@ -155,7 +160,8 @@ def test_ctrl_c_cancels_and_leaves_no_results_file(backend: str, fault_dir: Path
     if backend == "ray":
         cmd += ["--address", request.getfixturevalue("ray_cluster")]
     # as from a terminal: SIGINT not ignored, even where the test runner was started in the background
-    unignore = "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); os.execv(sys.argv[1], sys.argv[1:])"
+    unignore = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                "os.execv(sys.argv[1], sys.argv[1:])")
     proc = subprocess.Popen([sys.executable, "-c", unignore, *cmd], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             cwd=tmp_path, text=True)
     try:
@@ -199,3 +205,50 @@ def test_bad_backend_options_are_refused() -> None:
     with pytest.raises(ValueError, match="needs backend='ray'"):
         run_jobs(print, [Job("swarmloc/Ideal-v0", "uniform", (1,))], backend="serial", address="auto",
                  on_result=print, on_failure=print)
+
+
+# -- leaderboard verification on Ray ---------------------------------------------------
+
+
+def test_split_sample_keeps_tasks_whole_and_balances() -> None:
+    sample = [("a", 1), ("a", 2), ("a", 3), ("b", 1), ("c", 1), ("c", 2)]
+    chunks = split_sample(sample, 2)
+    assert sorted(map(sorted, chunks)) == [[("a", 1), ("a", 2), ("a", 3)], [("b", 1), ("c", 1), ("c", 2)]]
+    assert split_sample(sample, 8) == [[("a", 1), ("a", 2), ("a", 3)], [("c", 1), ("c", 2)], [("b", 1)]]
+
+
+def test_submit_runs_the_sandboxed_verification_as_ray_tasks(ray_cluster, tmp_path: Path) -> None:
+    import lb_helpers as H
+
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    options = H.submit_options(url) | {"sample_frac": 1.0, "rerun": ray_rerun()}
+    good = H.make_results_file(tmp_path / "good.json", "lb_fake_runner:good_ray")
+    receipt = submit(good, "lb_fake_runner:good_ray", {"name": "on ray", "track": "A"}, **options)
+    assert receipt.report.ok and len(receipt.report.episodes) == len(H.SUITE.episodes)
+    crash = H.make_results_file(tmp_path / "crash.json", "lb_fake_runner:crash")
+    with pytest.raises(VerificationFailed):
+        submit(crash, "lb_fake_runner:crash", {"name": "crash", "track": "A"}, **options)
+    with LeaderboardStore(url) as store:
+        assert [e.name for e in store.entries()] == ["on ray"]
+
+
+def test_submit_command_refuses_an_address_without_ray(tmp_path: Path) -> None:
+    from rich.console import Console
+
+    from swarmloc.bench.cli import submit as submit_command
+
+    console = Console(record=True, width=200, file=io.StringIO())
+    opts = submit_command.Options(results=tmp_path / "r.json", address="auto", db_url=f"sqlite:///{tmp_path / 'x.db'}")
+    assert submit_command.run(opts, console) == 1
+    assert "needs --backend ray" in console.export_text()
+
+
+def test_speed_rows_of_the_backends(ray_cluster) -> None:
+    from swarmloc.bench.speed.evaluation import measure_evaluation, measure_rows
+
+    suite = Suite("one", "0", (("swarmloc/GradualFault-v0", SEEDS[0]),))
+    rows = measure_evaluation(suite, backends=("process", "ray"), workers=(2,))
+    assert [(r["impl"], r["B"]) for r in rows] == [("evaluate-process", 2), ("evaluate-ray", 2)]
+    assert all(r["episodes_per_s"] > 0 and r["env_steps_per_s"] == pytest.approx(300 * r["episodes_per_s"]) for r in rows)
+    assert {"slowdown_vs_process", "overhead_s_per_task"} <= set(rows[1])
+    assert measure_rows(quick=True) == []  # pools and clusters are not started in a smoke test

@@ -96,10 +96,10 @@ def test_every_command_parses_its_help(path, module, capsys):
 
 
 def test_help_and_tasks_import_neither_torch_nor_numba():
-    """``swarmloc --help`` and ``swarmloc tasks`` stay light: the heavy modules load only inside handlers."""
+    """``swarmloc --help`` and ``swarmloc tasks`` stay light: the heavy modules (Ray too) load only inside handlers."""
     probe = ("import sys\nfrom swarmloc.bench.cli import main\n"
              "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
-             "print('HEAVY', sorted(m for m in ('torch', 'numba', 'torchrl', 'tensordict') if m in sys.modules))")
+             "print('HEAVY', sorted(m for m in ('torch', 'numba', 'torchrl', 'tensordict', 'ray') if m in sys.modules))")
     for args in (["--help"], ["tasks"], ["bench", "speed", "--help"], ["train", "mappo", "--help"]):
         proc = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, proc.stderr

@@ -9,6 +9,7 @@ assembles the results file) — and say which tasks failed (:class:`EvaluationFa
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,9 +17,9 @@ from typing import Any
 
 from swarmloc.agents.registry import LoadedMethod
 from swarmloc.bench.evaluation.backends import Job
-from swarmloc.bench.evaluation.results import MethodInfo, Results, SuiteInfo, make_results
+from swarmloc.bench.evaluation.results import MethodInfo, Results, SuiteInfo, make_results, write_results
 from swarmloc.bench.evaluation.suites import Suite, restrict_tasks
-from swarmloc.bench.evaluation.traces import Trace
+from swarmloc.bench.evaluation.traces import Trace, traces_path, write_traces
 
 
 @dataclass
@@ -167,4 +168,19 @@ class Gathered:
             cpu_seconds=self.cpu_seconds.get(m, 0.0))
 
 
-__all__ = ["EvaluationFailed", "Gathered", "MethodRun", "TaskOutcome", "method_info", "suite_info"]
+def partial_path(out: str | os.PathLike[str]) -> Path:
+    """Where ``evaluate`` puts the results of the tasks that did not fail: ``<stem>.partial.json``."""
+    out = Path(out)
+    return out.with_name(out.name.removesuffix(".json") + ".partial.json")
+
+
+def write_run(out: str | os.PathLike[str], results: Results, traces: list[Trace]) -> Path:
+    """Write a run's results file atomically, its traces first: a results file never lacks its traces."""
+    if traces:
+        write_traces(traces_path(out), traces)
+    write_results(out, results)
+    return Path(out)
+
+
+__all__ = ["EvaluationFailed", "Gathered", "MethodRun", "TaskOutcome", "method_info", "partial_path", "suite_info",
+           "write_run"]

@@ -29,7 +29,6 @@ import hashlib
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,10 +52,12 @@ from swarmloc.bench.evaluation.outcomes import (
     MethodRun,
     TaskOutcome,
     method_info,
+    partial_path,
     suite_info,
+    write_run,
 )
 from swarmloc.bench.evaluation.recorder import EpisodeRecorder
-from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, write_results
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
 from swarmloc.bench.evaluation.suites import Suite, require_data
 from swarmloc.bench.evaluation.traces import Trace, read_traces, traces_path, write_traces
 from swarmloc.envs.specs import TaskSpec
@@ -426,15 +427,9 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     return {m: gathered.run(m, loaded[m], suite, weights.get(m)) for m in methods}
 
 
-def partial_path(out: str | os.PathLike[str]) -> Path:
-    """Where ``evaluate`` puts the results of the tasks that did not fail: ``<stem>.partial.json``."""
-    out = Path(out)
-    return out.with_name(out.name.removesuffix(".json") + ".partial.json")
-
-
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,
-             backend: Backend | None = None, address: str | None = None, weights: str | None = None,
-             progress: bool = True, trace: bool = True) -> Results:
+             backend: Backend | None = None, address: str | None = None, seeds_per_job: int | None = None,
+             weights: str | None = None, progress: bool = True, trace: bool = True) -> Results:
     """Evaluate one method on a suite and (optionally) write the results file.
 
     The file is written atomically once every job is done: an interrupted evaluation
@@ -447,6 +442,7 @@ def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = Non
         workers: worker processes (or CPUs of a local Ray cluster).
         backend: ``serial``, ``process`` or ``ray`` (see ``evaluate_methods``).
         address: Ray cluster to join (``ray`` only).
+        seeds_per_job: seeds per job (None: a task's seeds; see ``make_jobs``).
         weights: optional weights file.
         progress: show a progress bar.
         trace: keep first-seed traces (written only with ``out``).
@@ -459,25 +455,18 @@ def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = Non
             (and, with ``out``, written to ``partial_path(out)``).
     """
     run = evaluate_methods([method], suite, workers=workers, backend=backend, address=address,
-                           weights={method: weights}, trace=trace, progress=progress)[method]
+                           seeds_per_job=seeds_per_job, weights={method: weights}, trace=trace,
+                           progress=progress)[method]
     if run.failed:
         partial = run.partial_results(suite)
         written = None
         if out is not None and partial is not None:
-            written = _write(partial_path(out), partial, run.traces)
+            written = write_run(partial_path(out), partial, run.traces)
         raise EvaluationFailed(run.loaded.name, run.failed, partial, written)
     results = run.results(suite)
     if out is not None:
-        _write(out, results, run.traces)
+        write_run(out, results, run.traces)
     return results
-
-
-def _write(out: str | os.PathLike[str], results: Results, traces: list[Trace]) -> Path:
-    """Traces first, then the results file: a results file never lacks its traces."""
-    if traces:
-        write_traces(traces_path(out), traces)
-    write_results(out, results)
-    return Path(out)
 
 
 __all__ = [

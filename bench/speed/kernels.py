@@ -34,7 +34,7 @@ from swarmloc.envs.world import World
 BATCHES = (1, 64, 1024, 4096)
 #: modules exposing ``measure_rows(quick: bool) -> list[dict]`` appended to the table when importable
 EXTRA_ROWS = ("swarmloc.bench.speed.world:measure_rows", "swarmloc.bench.speed.envs:measure_env_rows",
-              "swarmloc.bench.speed.estimators:measure_rows")
+              "swarmloc.bench.speed.estimators:measure_rows", "swarmloc.bench.speed.evaluation:measure_rows")
 
 
 @dataclass
