@@ -42,12 +42,15 @@ from typing import NamedTuple
 import numpy as np
 
 from .bound_kernel import pcrlb_kernel
+from .labels import LABEL_SIGMAS
 from .specs import TaskSpec
 
 #: A channel-step enters the bound unless its own injected systematic error (NLOS bias, GPS
-#: drift: ``SenseBuffers.injected``) exceeds this many nominal σ. One place to change it; it
-#: follows the labels-v1 threshold k.
-BOUND_LABEL_SIGMAS = 3.0
+#: drift: ``SenseBuffers.injected``) exceeds this many nominal σ: the k of labels v1
+#: (``labels.LABEL_SIGMAS``), so the bound leaves out what labels v1 call a fault of the
+#: measurement itself. (Labels v1 judge a 3-vector channel by a wider radius and count the
+#: heavy-tail excess of hybrid GPS noise too; no v0 task's GPS error comes near either.)
+BOUND_LABEL_SIGMAS = LABEL_SIGMAS
 #: bump whenever the bound's maths or inputs change (it keys the persistent cache)
 BOUND_VERSION = 1
 

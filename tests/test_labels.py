@@ -199,3 +199,37 @@ def test_oracle_v0_reproduces_shipped_episodes_exactly():
     for got in run_episodes("oracle-v0", episodes):
         want = shipped[(got["task"], got["seed"])]
         assert {k: got["metrics"][k] for k in want} == want, got["task"]
+
+
+def test_calibration_report_verdicts():
+    """The report's per-task verdicts: worse than the best shipped method, below the bound, CascadedFault."""
+    from swarmloc.bench.cli import COMMANDS, load_command
+    from swarmloc.bench.reproduce.labels import failures, has_vector_channels, task_summary
+
+    assert load_command(COMMANDS["reproduce"]["labels"]).Options().seeds == 32
+    assert has_vector_channels("swarmloc/GradualFault-v0") and not has_vector_channels("swarmloc/NLOS-v0")
+    seeds = [1, 2, 3, 4, 5, 6]
+    shipped = {"a": {"T": {"rmse": [1.0] * 6, "healthy_rmse": [None] * 6}},
+               "b": {"T": {"rmse": [2.0] * 6, "healthy_rmse": [None] * 6}}}
+
+    def summary(rmse, bound):
+        eps = [{"task": "T", "seed": s, "metrics": {"rmse": r, "bound_rmse": bound, "uniform_rmse": 3.0,
+                                                     "healthy_rmse": None}} for s, r in zip(seeds, rmse)]
+        return task_summary(eps, "T", seeds, shipped)
+
+    ok = summary([0.9, 0.95, 0.92, 0.97, 0.91, 0.93], 0.5)
+    assert ok["best"] == "a" and ok["vs_best"]["verdict"] == "better" and failures(ok) == []
+    worse = summary([1.1, 1.2, 1.15, 1.1, 1.3, 1.2], 0.5)
+    assert failures(worse) == ["worse than a"]
+    below = summary([0.4, 0.45, 0.42, 0.41, 0.43, 0.44], 0.5)
+    assert failures(below) == ["below the bound"]
+    tie = summary([0.9, 1.1, 0.95, 1.05, 1.0, 1.0], None)
+    assert tie["vs_best"]["verdict"] == "tie" and tie["bound"] is None and failures(tie) == []
+
+
+def test_docs_quote_the_shipped_thresholds():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "world.md").read_text(encoding="utf-8")
+    assert f"k = {LABEL_SIGMAS:g} for a scalar range" in text
+    assert f"a scalar at {VECTOR_LABEL_SIGMAS:g}σ (r = {equivalent_radius(VECTOR_LABEL_SIGMAS, 3):.2f})" in text
