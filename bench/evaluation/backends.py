@@ -269,7 +269,10 @@ def weights_bundle(path: str | os.PathLike[str]) -> dict[str, bytes]:
 
 
 def local_weights(bundle: Mapping[str, bytes], name: str) -> str:
-    """A weights bundle as files on this node (``<tmp>/swarmloc-weights/<sha256>/``, written once); the path of ``name``."""
+    """A weights bundle as files on this node, written once; returns the path of ``name``.
+
+    The folder is ``<tmp>/swarmloc-weights/<digest of the bundle>/``, so workers on one node share it.
+    """
     from swarmloc.bench.common.files import write_bytes_atomic
 
     digest = hashlib.sha256()
@@ -304,12 +307,11 @@ def _run_ray(fn: JobFunction, jobs: list[Job], workers: int, weights: Mapping[st
 
     ray = import_ray()
     started = connect_ray(address, workers)
-    pending: list[Any] = []
+    by_ref: dict[Any, Job] = {}  # the outstanding tasks
     try:
         remote = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(_ray_job)
         blobs = {m: (ray.put(weights_bundle(w)), Path(w).name) for m, w in weights.items() if w is not None}
         driver_path = [p for p in sys.path if p and Path(p).is_dir()]
-        by_ref = {}
         for job in jobs:
             blob, name = blobs.get(job.method, (None, None))
             by_ref[remote.remote(fn, job, blob, name, driver_path)] = job
@@ -325,7 +327,7 @@ def _run_ray(fn: JobFunction, jobs: list[Job], workers: int, weights: Mapping[st
                     continue
                 _report(job, outcome, on_result, on_failure)
     except BaseException:
-        for ref in pending:
+        for ref in list(by_ref):
             ray.cancel(ref, force=True)
         raise
     finally:
