@@ -16,8 +16,10 @@ across the plots. Method names are data: drawn as plain text (no mathtext), shor
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -135,8 +137,9 @@ def _heatmap(board: SuiteBoard, path: Path, values: np.ndarray, text: list[list[
     return _save(fig, path)
 
 
-def plot_gain_heatmap(board: SuiteBoard, path: Path) -> Path:
-    """Method × task ``2^G_t``, coloured by ``G_t`` (log2; blue better than uniform, red worse)."""
+def _task_matrix(board: SuiteBoard, value: Callable[[Any], float | None],
+                 label: Callable[[float], str]) -> tuple[np.ndarray, list[list[str]]]:
+    """Method × task values (NaN where undefined or not covered) and their cell texts."""
     rows, tasks = _scored(board), _ordered_tasks(board)
     values = np.full((len(rows), len(tasks)), np.nan)
     text = [["" for _ in tasks] for _ in rows]
@@ -144,9 +147,15 @@ def plot_gain_heatmap(board: SuiteBoard, path: Path) -> Path:
         assert standing.score is not None
         for j, task in enumerate(tasks):
             t = standing.score.tasks.get(task)
-            if t is not None:
-                values[i, j] = t.mean
-                text[i][j] = fmt_times(2.0**t.mean)
+            v = None if t is None else value(t)
+            if v is not None:
+                values[i, j], text[i][j] = v, label(v)
+    return values, text
+
+
+def plot_gain_heatmap(board: SuiteBoard, path: Path) -> Path:
+    """Method × task ``2^G_t``, coloured by ``G_t`` (log2; blue better than uniform, red worse)."""
+    values, text = _task_matrix(board, lambda t: t.mean, lambda g: fmt_times(2.0**g))
     return _heatmap(board, path, values, text, cmap="RdBu", vmin=-GAIN_LIMIT, vmax=GAIN_LIMIT,
                     colourbar="G_t = mean log2(RMSE_uniform / RMSE)",
                     title=f"{board.name} v{board.version} — × uniform per task")
@@ -154,16 +163,7 @@ def plot_gain_heatmap(board: SuiteBoard, path: Path) -> Path:
 
 def plot_gap_heatmap(board: SuiteBoard, path: Path) -> Path:
     """Method × task gap closed ``G_t / A_t`` (grey where undefined or not covered)."""
-    rows, tasks = _scored(board), _ordered_tasks(board)
-    values = np.full((len(rows), len(tasks)), np.nan)
-    text = [["" for _ in tasks] for _ in rows]
-    for i, standing in enumerate(rows):
-        assert standing.score is not None
-        for j, task in enumerate(tasks):
-            t = standing.score.tasks.get(task)
-            if t is not None and t.gap_closed is not None:
-                values[i, j] = t.gap_closed
-                text[i][j] = fmt_pct(t.gap_closed)
+    values, text = _task_matrix(board, lambda t: t.gap_closed, fmt_pct)
     return _heatmap(board, path, values, text, cmap="viridis", vmin=0.0, vmax=1.0,
                     colourbar="gap closed G_t / A_t", title=f"{board.name} v{board.version} — gap closed per task")
 
