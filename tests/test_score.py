@@ -60,13 +60,16 @@ def test_suite_ci_resamples_within_tasks():
     assert (a.ci_low, a.ci_high) == (b.ci_low, b.ci_high) and a.ci_low < a.S < a.ci_high
 
 
-def test_gap_closed_of_the_suite_is_the_mean_over_tasks_with_a_gap():
+def test_gap_closed_of_the_suite_is_the_ratio_of_sums_over_tasks_with_a_gap():
     eps = [_ep("A", 0, 1.0, 2.0, bound=0.5),   # g = 1, a = 2 → 0.5
-           _ep("B", 0, 1.0, 4.0, bound=1.0),   # g = 2, a = 2 → 1.0
-           _ep("C", 0, 1.0, 1.0, bound=0.9)]   # a = log2(1/0.9) < log2 1.25 → no ratio
+           _ep("B", 0, 1.0, 8.0, bound=1.0),   # g = 3, a = 3 → 1.0
+           _ep("C", 0, 1.0, 1.0, bound=0.9),   # a = log2(1/0.9) < log2 1.25 → no ratio
+           _ep("D", 0, 16.0, 1.0, bound=0.8)]  # g = −4, a = log2 1.25: ratio −12.4, yet only −4 in the sum
     s = S.suite_score(eps, n_resamples=10)
     assert s.tasks["A"].gap_closed == pytest.approx(0.5) and s.tasks["B"].gap_closed == pytest.approx(1.0)
-    assert s.tasks["C"].gap_closed is None and s.gap_closed == pytest.approx(0.75)
+    assert s.tasks["C"].gap_closed is None and s.tasks["D"].gap_closed == pytest.approx(-4 / math.log2(1.25))
+    # (1 + 3 − 4) / (2 + 3 + log2 1.25): one task with a small achievable gain does not swamp the suite
+    assert s.gap_closed == pytest.approx(0.0 / (5.0 + math.log2(1.25)))
 
 
 def test_performance_profile_by_hand():

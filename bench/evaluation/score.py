@@ -75,7 +75,7 @@ class SuiteScore:
         S: mean over covered tasks of ``G_t`` (log2 units).
         ci_low, ci_high: stratified-bootstrap 95 % CI of S.
         iqm: interquartile mean of every covered episode's g.
-        gap_closed: mean over tasks with a defined gap of ``G_t / A_t`` (None if none).
+        gap_closed: ``Σ G_t / Σ A_t`` over the tasks with a defined gap (None if none).
         tasks: task → ``TaskScore`` for covered tasks.
         uncovered: tasks of the suite the method could not run.
     """
@@ -185,9 +185,12 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
         return None
     S = float(np.mean([t.mean for t in covered.values()]))
     low, high = bootstrap_suite_ci([t.gains for t in covered.values()], n_resamples, seed)
-    closed = [t.gap_closed for t in covered.values() if t.gap_closed is not None]
+    # the gain realised over the gain achievable, summed over the tasks with a gap: a ratio of sums, so
+    # that one task with a small achievable gain cannot swamp the suite (a mean of ratios would)
+    gapped = [t for t in covered.values() if t.gap_closed is not None]
+    closed = sum(t.mean for t in gapped) / sum(t.achievable for t in gapped) if gapped else None
     return SuiteScore(S=S, ci_low=low, ci_high=high, iqm=iqm(np.concatenate([t.gains for t in covered.values()])),
-                      gap_closed=float(np.mean(closed)) if closed else None, tasks=covered,
+                      gap_closed=closed, tasks=covered,
                       uncovered=tuple(t for t in all_tasks if t not in covered))
 
 
