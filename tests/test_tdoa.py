@@ -15,8 +15,8 @@ from swarmloc.envs.bound import pcrlb, record_inputs
 from swarmloc.envs.bound_reference import pcrlb_reference
 from swarmloc.envs.cekf_reference import measurement_rows, predict_reference, run_reference, update_reference
 from swarmloc.envs.channels import ANCHOR, KIND_DIM, TDOA, build_layout, tdoa_code, tdoa_pair
-from swarmloc.envs.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
 from swarmloc.envs.core import LinkTrustCore
+from swarmloc.envs.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
 from swarmloc.envs.observation import KIND0, kind_one_hot
 from swarmloc.envs.specs import TaskSpec, all_pairs, ring_pairs
 from swarmloc.envs.tasks import get_spec
@@ -167,7 +167,7 @@ def test_reference_matches_filterpy_on_a_tdoa_only_case():
 
     def jac(x):
         H = np.zeros((len(pairs), 6))
-        u = lambda a: (x[:3] - a) / np.linalg.norm(x[:3] - a, axis=1, keepdims=True)  # noqa: E731
+        u = lambda a: (x[:3] - a) / np.linalg.norm(x[:3] - a, axis=1, keepdims=True)
         H[:, :3] = u(anchors[pairs[:, 1]]) - u(anchors[pairs[:, 0]])
         return H
 
@@ -205,3 +205,21 @@ def test_bound_fast_matches_reference_on_tdoa():
     assert (fast.failed_at == -1).all() and (ref.failed_at == -1).all()
     np.testing.assert_allclose(fast.pos_var, ref.pos_var, rtol=1e-9, atol=0)
     assert np.isfinite(fast.pos_var).all() and (fast.pos_var > 0).all()
+
+
+def test_fused_core_step_equals_the_batch_kernels_on_tdoa():
+    """The core's one-kernel step on TDOA channels gives bit for bit the separate kernels' numbers."""
+    from swarmloc.bench.speed.world import UnfusedCore
+
+    spec = get_spec(TASK, duration=1.5, faults={"nlos_gauss_markov": {"onset_rate": 2.0}})
+    seeds = np.array([3, 1_000_001])
+    fused, unfused = LinkTrustCore(spec, 2), UnfusedCore(spec, 2)
+    fused.reset(seeds)
+    unfused.reset(seeds)
+    rng = np.random.default_rng(0)
+    for k in range(spec.n_steps - 1):
+        trust = rng.uniform(0.0, 1.0, (2, spec.n_uav, spec.n_channels))
+        a, b = fused.step(trust), unfused.step(trust)
+        for name in ("resid", "pred", "nis", "valid", "estimate", "label", "active", "flops"):
+            assert np.array_equal(getattr(a, name), b[name]), (name, k)
+    assert np.array_equal(fused.x, unfused.x) and np.array_equal(fused.P, unfused.P)

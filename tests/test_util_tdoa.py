@@ -122,8 +122,8 @@ def test_import_refuses_bad_names_and_a_lone_survey(tmp_path):
 def test_no_dataset_file_is_tracked_by_git():
     files = subprocess.run(["git", "ls-files"], cwd=REPO_ROOT, capture_output=True, text=True, check=True).stdout
     bad = [f for f in files.splitlines()
-           if "util-tdoa" in f or "util-twr" in f or f.endswith(".bin") or f.endswith("tdoa.csv.gz")
-           or f.endswith("imu.csv.gz") or Path(f).name.startswith(("anchors_c0", "anchor_0"))]
+           if "util-tdoa" in f or "util-twr" in f or f.endswith((".bin", "tdoa.csv.gz", "imu.csv.gz"))
+           or Path(f).name.startswith(("anchors_c0", "anchor_0"))]
     assert not bad, f"dataset files are tracked: {bad}"
 
 

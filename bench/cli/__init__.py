@@ -56,6 +56,7 @@ COMMANDS: CommandTable = {
         "immarkf": "swarmloc.bench.cli.reproduce_immarkf",
         "federated": "swarmloc.bench.cli.reproduce_federated",
         "dtvirm": "swarmloc.bench.cli.reproduce_dtvirm",
+        "real": "swarmloc.bench.cli.reproduce_real",
         "labels": "swarmloc.bench.cli.reproduce_labels",
     },
     "bench": {

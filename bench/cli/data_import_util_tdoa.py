@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import tyro
 
@@ -24,9 +24,9 @@ class Options:
     """Flight folder name, e.g. c0426-tdoa2-traj11-wood-card-plastic-metal (the tasks' names, see `swarmloc tasks`)."""
     out: Annotated[Path, tyro.conf.arg(metavar="DIR")]
     """The dataset folder that receives <flight>/ (usually <data>/util-tdoa)."""
-    survey: Annotated[Optional[Path], tyro.conf.arg(metavar="NPZ")] = None
+    survey: Annotated[Path | None, tyro.conf.arg(metavar="NPZ")] = None
     """The session's converted anchor survey (anchor_0426.npz); writes anchors_<constellation>.csv."""
-    constellation: Optional[str] = None
+    constellation: str | None = None
     """Constellation name for the anchors file (c0425, c0426, c0607); required with --survey."""
     overwrite: bool = False
     """Replace an existing flight folder."""

@@ -68,10 +68,12 @@ def flight_data_missing(spec: TaskSpec, data_dir: str | Path | None = None) -> s
     """
     flight = _flight(spec)
     if flight.dataset == "util-tdoa":
-        from .tdoa_import import IMPORT_COMMAND, TDOA_SOURCE as SOURCE
+        from .tdoa_import import IMPORT_COMMAND
+        from .tdoa_import import TDOA_SOURCE as SOURCE
         what = "UTIL TDOA flight"
     else:
-        from .util_import import IMPORT_COMMAND, UTIL_SOURCE as SOURCE
+        from .util_import import IMPORT_COMMAND
+        from .util_import import UTIL_SOURCE as SOURCE
         what = "UTIL TWR log"
     try:
         folder = dataset_folder(spec, data_dir)
@@ -82,8 +84,12 @@ def flight_data_missing(spec: TaskSpec, data_dir: str | Path | None = None) -> s
             return (f"{what} {log!r} is missing from {folder}.\nThe data comes from {SOURCE}\n"
                     f"Import it with `{IMPORT_COMMAND}` using DIR = {folder}.")
     if not (folder / flight.anchors).is_file():
-        return (f"anchor file {flight.anchors!r} is missing from {folder}.\nThe data comes from {SOURCE}\n"
-                f"Import it with `{IMPORT_COMMAND}` using DIR = {folder}.")
+        how = f"Import it with `{IMPORT_COMMAND}` using DIR = {folder}."
+        if flight.dataset == "util-twr" and flight.anchors != "anchors.csv":
+            how = (f"It is the session's survey in the Vicon frame: the anchors_c0607.csv that `swarmloc data "
+                   f"import-util-tdoa RAW_LOG --survey anchor_0607.npz --constellation c0607 ...` writes, "
+                   f"copied to {folder / flight.anchors}.")
+        return f"anchor file {flight.anchors!r} is missing from {folder}.\nThe data comes from {SOURCE}\n{how}"
     return None
 
 

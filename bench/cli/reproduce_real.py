@@ -1,0 +1,33 @@
+"""``swarmloc reproduce real``: every registered method on the real flights (suite real-v1) → docs/reproduce/real.md."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Options:
+    """The sim-to-real report: every method on real-v1 (UTIL TWR + 8 TDOA flights) and on TDOA-v1."""
+
+    out: Path = Path("real.md")
+    """Markdown file to write (a folder: <out>/real.md); raw numbers beside it as .json, the plot as .png."""
+    workers: int = 2
+    """Worker processes."""
+    seeds: int = 4
+    """Test seeds per task, 1 … 4 (the suite's 4)."""
+    methods: tuple[str, ...] = ()
+    """Methods (default: every registered one)."""
+
+
+def run(opts: Options) -> int:
+    """Write the report and print it; without the data, say where it comes from (exit status 2)."""
+    from swarmloc.bench.reproduce.real import reproduce_real
+
+    try:
+        path = reproduce_real(opts.out, list(opts.methods) or None, workers=opts.workers, seeds=opts.seeds)
+    except (FileNotFoundError, ValueError) as err:
+        print(f"error: {err}")
+        return 2
+    print(path.read_text())
+    return 0
