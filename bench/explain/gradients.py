@@ -25,6 +25,7 @@ recorded inputs.
 
 from __future__ import annotations
 
+import abc
 import copy
 from dataclasses import dataclass
 
@@ -45,7 +46,7 @@ Tensor = torch.Tensor
 DTYPE = torch.float32
 
 
-class DifferentiableTrust:
+class DifferentiableTrust(abc.ABC):
     """One channel's trust as a torch function of its features (see the module docstring).
 
     ``channel_trust(x, block, slot, state)``: x ``(M, F)`` the channel's features, block
@@ -59,15 +60,16 @@ class DifferentiableTrust:
     def reset(self, batch_size: int, shape: tuple[int, int]) -> None:
         """Start B episodes with N UAVs and L channels."""
 
+    @abc.abstractmethod
     def state(self) -> np.ndarray:
         """``(B, N, L, S)`` state before the pending step."""
-        raise NotImplementedError
 
     def observe(self, inp: TrustInput, trust: np.ndarray) -> None:
         """Advance the state past a step the method was given and the trust ``(B, N, L)`` it returned."""
 
+    @abc.abstractmethod
     def channel_trust(self, x: Tensor, block: Tensor, slot: Tensor, state: Tensor) -> Tensor:
-        raise NotImplementedError
+        """α ``(M,)`` of the channels ``x`` (see the class docstring)."""
 
     def path_kinks(self, x: Tensor, xb: Tensor, block: Tensor, slot: Tensor, state: Tensor) -> Tensor:
         """``(M, K)`` points a ∈ [0, 1] of the path x̄ + a (x − x̄) where the gradient may jump
