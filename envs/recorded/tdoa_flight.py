@@ -50,8 +50,10 @@ from .util_flight import (
     MAD_TO_SIGMA,
     VELOCITY_HALF_SPAN,
     Recording,
+    _read_only,
     ahrs_attitude,
     read_anchors,
+    read_tables,
     step_means,
     world_acceleration,
 )
@@ -113,11 +115,6 @@ class TdoaRecording(Recording):
     counts: TdoaRowCounts
 
 
-def _read_only(*arrays: np.ndarray) -> None:
-    for a in arrays:
-        a.flags.writeable = False
-
-
 @functools.lru_cache(maxsize=4)
 def read_tdoa_log(log_dir: Path) -> TdoaLog:
     """Read the tdoa, mocap and imu CSVs of one imported TDOA flight (cached).
@@ -126,17 +123,8 @@ def read_tdoa_log(log_dir: Path) -> TdoaLog:
         FileNotFoundError: a CSV is missing (the message names it and the import command).
         ValueError: a CSV has the wrong number of columns.
     """
-    arrays = []
-    for name, columns in (("tdoa", 4), ("mocap", 8), ("imu", 7)):
-        path = log_dir / f"{name}.csv.gz"
-        if not path.is_file():
-            raise FileNotFoundError(f"{path} is missing; import the flight with `swarmloc data import-util-tdoa`")
-        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        if table.shape[1] != columns:
-            raise ValueError(f"{path}: expected {columns} columns, found {table.shape[1]}")
-        arrays.append(np.ascontiguousarray(table))
-    _read_only(*arrays)
-    return TdoaLog(*arrays)
+    return TdoaLog(*read_tables(log_dir, (("tdoa", 4), ("mocap", 8), ("imu", 7)),
+                                "import the flight with `swarmloc data import-util-tdoa`"))
 
 
 def airborne_window(mocap: np.ndarray, altitude: float = AIRBORNE_ALTITUDE) -> tuple[float, float]:

@@ -143,17 +143,28 @@ def read_flight_log(log_dir: Path) -> FlightLog:
     Raises:
         FileNotFoundError: a CSV is missing (the message names it).
     """
+    return FlightLog(*read_tables(log_dir, (("imu", 7), ("uwb_range", 3), ("mocap", 8)),
+                                  "re-import the log (see the dataset README)"))
+
+
+def read_tables(log_dir: Path, tables: tuple[tuple[str, int], ...], how_to_import: str) -> list[np.ndarray]:
+    """Read ``<log_dir>/<name>.csv.gz`` for each ``(name, columns)`` as read-only float arrays.
+
+    Raises:
+        FileNotFoundError: a CSV is missing (the message names it and ``how_to_import``).
+        ValueError: a CSV has the wrong number of columns.
+    """
     arrays = []
-    for name, columns in (("imu", 7), ("uwb_range", 3), ("mocap", 8)):
+    for name, columns in tables:
         path = log_dir / f"{name}.csv.gz"
         if not path.is_file():
-            raise FileNotFoundError(f"{path} is missing; re-import the log (see the dataset README)")
+            raise FileNotFoundError(f"{path} is missing; {how_to_import}")
         table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
         if table.shape[1] != columns:
             raise ValueError(f"{path}: expected {columns} columns, found {table.shape[1]}")
         arrays.append(np.ascontiguousarray(table))
     _read_only(*arrays)
-    return FlightLog(*arrays)
+    return arrays
 
 
 def interpolate_positions(mocap: np.ndarray, t: np.ndarray) -> np.ndarray:
