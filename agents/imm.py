@@ -446,6 +446,8 @@ def imm_step(state: ImmState, z: np.ndarray, valid: np.ndarray, R: np.ndarray, v
             if cfg.fading:
                 gate = chi2_threshold(1.0 - cfg.fading_confidence, M_DIM)
                 fading = fading_factor(r, _H_FIX, P_f, Q, R_used, gate, cfg.fading_iters)
+                # a lost fix is no evidence of a manoeuvre: its residual must not inflate P
+                fading = np.where(valid[:, :, None], fading, 1.0)
         # P⁻ = λ F P Fᵀ + Q                                                   (eq. 15, 29)
         P_pred = fading[..., None, None] * P_f + Q
     x_new, P_new, S = joseph_update(x_pred, P_pred, r, H, R_used)

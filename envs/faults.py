@@ -19,6 +19,8 @@ from .rng import Stream, uniform
 from .specs import TaskSpec
 
 BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
+#: ``hybrid_param[5]``: the hybrid GPS noise model (``specs.HybridNoise.model``)
+HYBRID_WEIGHTED_SUM, HYBRID_MIXTURE = 0, 1
 
 
 #: schedule fields that describe the task, not an episode (no leading batch axis)
@@ -45,8 +47,9 @@ class FaultSchedule(NamedTuple):
             ``drift_nodes`` ``(B, Wg, N)``.
         gm_mask: ``(N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(6,)``
             [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias].
-        hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(5,)``
-            [ratio, t_scale, gauss_sigma, dof_low, dof_high].
+        hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(6,)``
+            [ratio, t_scale, gauss_sigma, dof_low, dof_high, model] (model
+            ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``).
         packet_loss: probability a valid measurement is lost.
     """
 
@@ -205,11 +208,12 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         gm_param = np.array([g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias])
 
     hybrid_nodes = np.zeros(n, dtype=np.bool_)
-    hybrid_param = np.zeros(5)
+    hybrid_param = np.zeros(6)
     if f.hybrid_noise is not None:
         h = f.hybrid_noise
         hybrid_nodes = _node_mask(h.nodes, n)
-        hybrid_param = np.array([h.ratio, h.t_scale, h.gauss_sigma, h.dof_low, max(h.dof_high, h.dof_low)])
+        model = HYBRID_MIXTURE if h.model == "mixture" else HYBRID_WEIGHTED_SUM
+        hybrid_param = np.array([h.ratio, h.t_scale, h.gauss_sigma, h.dof_low, max(h.dof_high, h.dof_low), model])
 
     def stack(rows: list, k: int, shape_tail: tuple, dtype=np.float64) -> np.ndarray:
         if not rows:

@@ -5,8 +5,10 @@ A channel-step is labelled faulty when its *systematic* error exceeds k·σ_eff
 
 * the measurement's own error (``SenseBuffers.systematic``, signed, written by the world):
   injected range bias (scheduled, uniform and Gauss–Markov NLOS), GPS drift and the
-  heavy-tail excess of hybrid GPS noise (its Student-t component a·σ_t·t_ν; the
-  Gaussian component is the nominal white noise);
+  heavy-tail excess of hybrid GPS noise (``specs.HybridNoise``: in the weighted sum its
+  Student-t component a·σ_t·t_ν, the Gaussian component being the nominal white noise; in
+  the mixture the whole of a Student-t draw, a Gaussian draw being the nominal noise, so a
+  t draw is labelled when it lands outside the fix's 3σ-equivalent radius);
 * for a peer channel, the neighbour's broadcast-estimate error as the filter uses it: a
   peer range is fused as z = ‖p_i − p̂_j‖ + v with the neighbour's prior p̂_j taken as a
   known point, so its error is e = b + ‖p_i − p_j‖ − ‖p_i − p̂_j‖ ≈ b + uᵀ(p̂_j − p_j)

@@ -294,14 +294,31 @@ class GpsDrift(Frozen):
 
 
 class HybridNoise(Frozen):
-    """GPS noise v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²) with ν drawn in [dof_low, dof_high] (imm-arkf eq. 1)."""
+    """Heavy-tailed GPS noise on the fixes of ``nodes`` (imm-arkf §2.1), in one of two models.
+
+    * ``"weighted_sum"`` (every v0 task): eq. 1 as printed, v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²)
+      per axis, a = ``ratio``, ν drawn per axis and step in [dof_low, dof_high]. A blend of
+      two near-Gaussian draws: its spread is *below* σ_g and it has no outliers.
+    * ``"mixture"`` (Benchmark v1): a contamination mixture. Each fix is, with probability
+      p = ``ratio``, a trivariate Student-t draw σ_t·n / sqrt(χ²_ν / ν) (n ~ N(0, I₃), one χ²
+      for the three axes: the paper's multivariate t; ν drawn per fix in [dof_low, dof_high]),
+      else N(0, σ_g² I). A multipath-hit fix is off in every axis at once.
+
+    ``gauss_sigma`` should equal the fix's nominal ``Sensors.gps_sigma``: the filters and the
+    information bound take that σ as the fix's noise.
+    """
 
     ratio: Probability
     nodes: tuple[int, ...] = ()
     t_scale: PositiveFloat = 1.0
     gauss_sigma: PositiveFloat = 1.0
-    dof_low: int = Field(default=25, ge=1)
-    dof_high: int = Field(default=50, ge=1)
+    # ≤ 63: the RNG keeps 64 normal draws per Student-t draw (rng.student_t_at)
+    dof_low: int = Field(default=25, ge=1, le=63)
+    dof_high: int = Field(default=50, ge=1, le=63)
+    model: Literal["weighted_sum", "mixture"] = Field(
+        default="weighted_sum",
+        description="'weighted_sum': v = a·t + (1 − a)·g per axis (imm-arkf eq. 1 as printed, v0); 'mixture': "
+                    "each fix Student-t with probability `ratio`, else Gaussian (v1)")
 
 
 class UwbOutage(Frozen):

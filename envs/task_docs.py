@@ -83,7 +83,11 @@ def _faults(spec: TaskSpec) -> list[str]:
     for d in f.gps_drifts:
         lines.append(f"GPS drift {d.rate:g} m/s along {list(d.direction)} on UAVs {list(d.nodes)}, "
                      f"{d.start:g}–{d.end:g} s.")
-    if (h := f.hybrid_noise) is not None:
+    if (h := f.hybrid_noise) is not None and h.model == "mixture":
+        lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}, a contamination mixture: each fix is "
+                     f"Student-t (scale {h.t_scale:g} m, ν ∈ [{h.dof_low}, {h.dof_high}]) with probability "
+                     f"{h.ratio:g}, else N(0, {h.gauss_sigma:g}² I).")
+    elif h is not None:
         lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}: v = a·t_ν(σ {h.t_scale:g}) + "
                      f"(1 − a)·N(0, {h.gauss_sigma:g}²), a = {h.ratio:g}, ν ∈ [{h.dof_low}, {h.dof_high}].")
     lines += [f"{name}: {value}." for name, value in _other_fields(f, _DESCRIBED_FAULTS)]

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from .channels import ANCHOR, LANDMARK, PEER, PEER_REL, TDOA
-from .faults import BIAS_UNIFORM, FaultSchedule
+from .faults import BIAS_UNIFORM, HYBRID_MIXTURE, FaultSchedule
 from .labels import own_sigmas
 from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
 from .trajectories import truth_at
@@ -170,7 +170,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     drift_time, drift_rate, drift_nodes = fs.drift_time, fs.drift_rate, fs.drift_nodes
     gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
     g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
-    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high]
+    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
     n, n_l = z.shape[1], z.shape[2]
     # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
     p, v, a = np.empty(3), np.empty(3), np.empty(3)
@@ -301,6 +301,21 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                         z[b, i, l, d] = pos[b, j, d] - pos[b, i, d] + sg * normal_at(key_peer, idx * 3 + d)
                     lab = _imu_faulty(imu_time, imu_nodes, b, j, t)
                 else:  # GPS: p + drift + noise
+                    # hybrid noise as a contamination mixture: one draw per fix. With probability
+                    # p the fix is a trivariate Student-t σ_t·n / sqrt(χ²_ν / ν), one χ² for the
+                    # three axes (imm-arkf's multivariate t), ν uniform in [ν_lo, ν_hi]; else
+                    # N(0, σ_g² I). The same n serves either branch.
+                    mixture = hybrid_nodes[i] and h[5] == HYBRID_MIXTURE
+                    heavy, t_factor = False, 0.0
+                    if mixture and uniform_at(key_mix, 2 * idx) < h[0]:
+                        heavy = True
+                        lo_nu, hi_nu = int(h[3]), int(h[4])
+                        nu = lo_nu + int(uniform_at(key_mix, 2 * idx + 1) * (hi_nu - lo_nu + 1))
+                        chi2 = 0.0
+                        for c in range(nu):
+                            nc = normal_at(key_gps, 2_000_000 + idx * 64 + c)
+                            chi2 += nc * nc
+                        t_factor = h[1] / math.sqrt(chi2 / nu)
                     drift2 = 0.0
                     for d in range(3):
                         drift = 0.0
@@ -308,7 +323,13 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             if drift_nodes[b, wi, i] and t >= drift_time[b, wi, 0]:
                                 drift += drift_rate[b, wi, d] * (min(t, drift_time[b, wi, 1]) - drift_time[b, wi, 0])
                         drift2 += drift * drift
-                        if hybrid_nodes[i]:
+                        if mixture:
+                            # a Student-t draw is heavy-tail excess as a whole (systematic), as the
+                            # t component of the weighted sum is; a Gaussian draw is the nominal noise
+                            nd = normal_at(key_gps, idx * 3 + d)
+                            tail = t_factor * nd if heavy else 0.0
+                            noise = tail if heavy else h[2] * nd
+                        elif hybrid_nodes[i]:
                             # v = a·t_ν(σ_t) + (1 − a)·N(0, σ_g²), ν uniform in [ν_lo, ν_hi] (imm-arkf eq. 1)
                             lo_nu, hi_nu = int(h[3]), int(h[4])
                             nu = lo_nu + int(uniform_at(key_mix, idx * 3 + d) * (hi_nu - lo_nu + 1))

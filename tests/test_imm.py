@@ -120,6 +120,23 @@ def test_fading_factor_brings_the_statistic_to_the_gate():
     assert np.all(d2[d2_unit > 7.81] <= 7.81 + 1e-6)
 
 
+def test_a_lost_fix_leaves_the_arkf_as_a_plain_prediction():
+    """A fix that did not arrive (valid = False) carries no evidence: its residual must neither update the
+    state nor inflate the prediction through the fading factor."""
+    dt, cfg = 0.1, ImmConfig()
+    F, Q = transition_matrices(cfg.turn_rate, dt), cfg.q * np.eye(6)
+    st = ImmState(x=np.zeros((1, 1, 3, 6)), P=np.tile(np.eye(6) * 0.1, (1, 1, 3, 1, 1)),
+                  mu=np.array(cfg.mu0).reshape(1, 1, 3))
+    R = np.eye(3)[None, None]
+    far = np.array([[[6.0, 0.0, 0.0]]])  # a 6σ residual: past the χ² gate even with the robust R̄
+    lost, info = imm_step(st, far, np.zeros((1, 1), bool), R, "arkf", cfg, F, Q)
+    kf, _ = imm_step(st, far, np.zeros((1, 1), bool), R, "kf", cfg, F, Q)
+    assert np.allclose(info.fading, 1.0) and np.allclose(info.trust, 0.0)
+    assert np.allclose(lost.x, kf.x) and np.allclose(lost.P, kf.P) and np.allclose(lost.mu, kf.mu)
+    _, seen = imm_step(st, far, np.ones((1, 1), bool), R, "arkf", cfg, F, Q)
+    assert (seen.fading > 1.0).all()
+
+
 def test_polar_jacobian_matches_finite_differences():
     p = np.array([[3.0, 5.0, 2.0], [-7.0, 1.5, 0.0]])
     st = np.array([0.0, -40.0])
