@@ -58,6 +58,7 @@ COMMANDS: CommandTable = {
         "dtvirm": "swarmloc.bench.cli.reproduce_dtvirm",
         "real": "swarmloc.bench.cli.reproduce_real",
         "labels": "swarmloc.bench.cli.reproduce_labels",
+        "calibration": "swarmloc.bench.cli.reproduce_calibration",
     },
     "bench": {
         "speed": "swarmloc.bench.cli.bench_speed",
