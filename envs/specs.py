@@ -364,7 +364,14 @@ class FilterSettings(Frozen):
 
 
 class Scoring(Frozen):
-    """Which nodes and interval are scored, and the fault window metrics look at."""
+    """Which nodes and interval are scored, and the fault window metrics look at.
+
+    ``nodes_from_schedule`` makes the scored set per episode: with ``"healthy"`` an episode
+    scores those of ``nodes`` (all UAVs if empty) that its fault schedule leaves without an
+    IMU fault (CascadedFaultRandom-v1: the faulty nodes are drawn per episode). Every metric
+    over scored UAVs (``rmse``, ``jitter``, ``delay_ms``, …) and the information bound use
+    that set; ``"all"`` (the default, every v0 task) scores ``nodes`` in every episode.
+    """
 
     nodes: tuple[int, ...] = Field(default=(), description="scored UAVs; empty = all")
     healthy_nodes: tuple[int, ...] = Field(default=(), description="nodes for healthy-node RMSE; empty = not defined")
@@ -392,6 +399,10 @@ class TaskSpec(Frozen):
     filter: FilterSettings = FilterSettings()
     scoring: Scoring = Scoring()
 
+    nodes_from_schedule: Literal["all", "healthy"] = Field(
+        default="all",
+        description="'all': every episode scores `nodes`; 'healthy': only those of `nodes` the episode's fault "
+                    "schedule leaves without an IMU fault (needs an IMU fault)")
     @model_validator(mode="after")
     def _consistent(self) -> "TaskSpec":
         n = self.n_uav
@@ -451,6 +462,8 @@ class TaskSpec(Frozen):
         """Filter steps per episode (T)."""
         return int(round(self.duration / self.dt))
 
+        if self.scoring.nodes_from_schedule == "healthy":
+            self._check_healthy_scoring()
     @property
     def n_peer_channels(self) -> int:
         return 0 if self.sensors.peers.kind == "none" else self.n_uav - 1
@@ -464,6 +477,21 @@ class TaskSpec(Frozen):
     def n_anchor_channels(self) -> int:
         """Anchor channels per UAV: one range per anchor, or one range difference per TDOA pair."""
         return len(self.anchors) if self.sensors.tdoa is None else len(self.sensors.tdoa.pairs)
+
+    def _check_healthy_scoring(self) -> None:
+        """``scoring.nodes_from_schedule="healthy"`` must leave every episode at least one scored UAV."""
+        f, s = self.faults, self.scoring
+        if not f.imu_cascades and f.imu_cascade_random is None:
+            raise ValueError("scoring.nodes_from_schedule='healthy' needs an IMU fault (faults.imu_cascades or "
+                             "faults.imu_cascade_random): without one every node is healthy (use 'all')")
+        if s.align_first_seconds > 0:
+            raise ValueError("scoring.nodes_from_schedule='healthy' with scoring.align_first_seconds > 0 is not "
+                             "supported: the alignment is fitted on a fixed set of scored UAVs")
+        scored = set(self.scored_nodes) - {i for c in f.imu_cascades for i in (c.nodes or range(self.n_uav))}
+        drawn = f.imu_cascade_random.n_faulty if f.imu_cascade_random is not None else 0
+        if len(scored) <= drawn:
+            raise ValueError(f"scoring.nodes_from_schedule='healthy' could score no UAV: {len(scored)} scored UAV(s) "
+                             f"outside the scheduled IMU cascades, and {drawn} are drawn faulty per episode")
 
     @property
     def scored_nodes(self) -> tuple[int, ...]:

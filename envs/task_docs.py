@@ -147,6 +147,10 @@ def _measurement_model(spec: TaskSpec) -> str:
         lines.append(f"- Scoring: errors after the yaw + 3-D translation that aligns the estimates of "
                      f"{spec.scoring.start:g}–{spec.scoring.start + spec.scoring.align_first_seconds:g} s with the "
                      "truth (absolute translation and yaw are unobservable; `swarmloc.bench.evaluation.alignment`).")
+    if spec.scoring.nodes_from_schedule == "healthy":
+        lines.append("- Scoring: each episode scores only the UAVs its fault schedule leaves without an IMU fault "
+                     "(`scoring.nodes_from_schedule = \"healthy\"`); how fast the faulty ones get back is "
+                     "`recovery_s` (docs/scoring.md).")
     lines += [f"- Sensors, `{name}`: {value}." for name, value in _other_fields(s, _DESCRIBED_SENSORS)]
     fl = spec.filter
     lines.append(f"- Filter: one 6-state CEKF per UAV; a channel joins the joint update when α > α_th = "

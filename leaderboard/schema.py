@@ -58,6 +58,9 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
     "healthy_rmse": (0.0, math.inf),
     "uniform_rmse": (0.0, math.inf),  # the standard CEKF on the same episode (score v1's reference)
     "bound_rmse": (0.0, math.inf),  # the episode's information bound
+    # Seconds after an IMU fault ends (censored at the episode's end), and a flag per episode.
+    "recovery_s": (0.0, math.inf),
+    "recovered": (0.0, 1.0),
     # A flag per episode, a fraction once averaged.
     "diverged": (0.0, 1.0),
     # Time and energy cannot be negative.

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
+from swarmloc.bench.evaluation.results import SCHEMA_METRICS, Results
 from swarmloc.leaderboard.errors import VerificationFailed
 from swarmloc.leaderboard.rerun import VerifyLimits, run_in_worker, worker_environment
 
@@ -152,14 +152,16 @@ def compare_episodes(
 ) -> list[MetricMismatch]:
     """Every metric of every sampled episode that the re-run did not reproduce.
 
-    An episode missing from the re-run output counts as a mismatch of every metric.
+    Only the metrics the file's schema version holds are compared (a version-2 file has no
+    ``recovery_s``, which the re-run computes). An episode missing from the re-run output
+    counts as a mismatch of every metric.
     """
     submitted = {(e.task, e.seed): e.metrics.model_dump() for e in results.episodes}
     rerun = {(str(e["task"]), int(e["seed"])): e.get("metrics", {}) for e in recomputed}
     mismatches = []
     for key in sample:
         mine, theirs = submitted[key], rerun.get(key)
-        for name in METRIC_NAMES:
+        for name in SCHEMA_METRICS[results.schema_version]:
             got = None if theirs is None else theirs.get(name)
             if theirs is None or not tolerance.agrees(mine[name], got):
                 mismatches.append(MetricMismatch(key[0], key[1], name, mine[name], got))

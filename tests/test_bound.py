@@ -139,21 +139,40 @@ def test_undefined_tasks_are_null_with_a_reason():
     assert util.rmse is None and "recorded" in util.reason
 
 
-@pytest.mark.parametrize("task_id", ["swarmloc/CascadedFault-v0", "swarmloc/CascadedFaultRandom-v0",
-                                     "swarmloc/AnchorFree-v0", "swarmloc/HybridNoise10-v0"])
-def test_scored_steps_and_uavs_match_the_recorder(task_id):
-    spec = get_spec(task_id)
-    seeds = np.array([1_000_000, 1_000_001])
+HEALTHY_PER_EPISODE = {"nodes_from_schedule": "healthy"}
+
+
+@pytest.mark.parametrize("task_id, scoring", [
+    ("swarmloc/CascadedFault-v0", {}), ("swarmloc/CascadedFaultRandom-v0", {}),
+    ("swarmloc/CascadedFaultRandom-v0", HEALTHY_PER_EPISODE), ("swarmloc/AnchorFree-v0", {}),
+    ("swarmloc/HybridNoise10-v0", {})])
+def test_scored_steps_and_uavs_match_the_recorder(task_id, scoring):
+    spec = get_spec(task_id, scoring=scoring)
+    seeds = np.array([1_000_000, 1_000_001, 1_000_002])
     world = World(spec, len(seeds))
     world.reset(seeds)
     rec = EpisodeRecorder(spec, seeds, world.schedule, world.layout.n_channels, False, False, False)
-    steps, nodes = BB.scored_selection(spec)
-    assert (steps == rec.scored_steps).all() and (nodes == rec.nodes).all()
     for b in range(len(seeds)):
-        mine, theirs = BB.healthy_selection(spec, world.schedule, b), rec._healthy(b)
-        assert (mine is None) == (theirs is None)
-        if mine is not None:
-            assert all((m == t).all() for m, t in zip(mine, theirs))
+        steps, nodes = BB.scored_selection(spec, world.schedule, b)
+        assert (steps == rec.scored_steps).all() and (nodes == rec.nodes[b]).all()
+        if scoring:  # each episode scores exactly the UAVs its schedule leaves without an IMU fault
+            assert (nodes == ~world.schedule.faulty_nodes[b]).all() and nodes.sum() == 2
+    if scoring:
+        assert len({tuple(row) for row in rec.nodes}) > 1, "these seeds should draw different faulty UAVs"
+
+
+def test_bound_with_per_episode_healthy_scoring_is_over_the_episodes_healthy_uavs():
+    spec = get_spec("swarmloc/CascadedFaultRandom-v0", duration=26.0, scoring=HEALTHY_PER_EPISODE)
+    seeds = [1_000_000, 1_000_001]
+    inputs, world = record_inputs(spec, seeds)
+    pos_var = pcrlb(inputs).pos_var
+    bounds = BB.bounds_from_inputs(spec, seeds, inputs, world.schedule)
+    for b, bound in enumerate(bounds):
+        healthy = ~world.schedule.faulty_nodes[b]
+        assert bound.rmse == pytest.approx(np.sqrt(pos_var[:, b][:, healthy].mean()), rel=1e-12)
+    # the same episodes scored over every UAV (v0's selection) have another bound
+    every = BB.compute_bounds(get_spec("swarmloc/CascadedFaultRandom-v0", duration=26.0), seeds)
+    assert all(a.rmse != b.rmse for a, b in zip(bounds, every))
 
 
 def test_bounds_are_cached_per_process_and_on_disk(tmp_path, monkeypatch):

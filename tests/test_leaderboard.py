@@ -323,6 +323,21 @@ def test_every_metric_has_physical_bounds() -> None:
     assert all(low < high for low, high in METRIC_BOUNDS.values())
 
 
+def test_verification_compares_only_the_metrics_of_the_files_schema() -> None:
+    from swarmloc.bench.evaluation import results as R
+    from swarmloc.leaderboard.verify import EXACT, compare_episodes
+
+    metrics = R.EpisodeMetrics.of(rmse=1.0, team_return=2.0)
+    results = R.make_results(
+        R.MethodInfo(name="m", entry_point="pkg:make", privileged=False, track="A", deterministic=True),
+        R.SuiteInfo(name="s", version="0", sha256="0" * 64), [{"task": "t", "seed": 1, "metrics": metrics}])
+    rerun = [{"task": "t", "seed": 1, "metrics": {**metrics.model_dump(), "recovery_s": 3.5, "recovered": 1.0}}]
+    assert [m.metric for m in compare_episodes(results, rerun, [("t", 1)], EXACT)] == ["recovery_s", "recovered"]
+    # a schema-2 file holds no recovery metrics (they read as null): the re-run's are not compared
+    older = R.Results.model_validate({**results.model_dump(), "schema_version": 2})
+    assert compare_episodes(older, rerun, [("t", 1)], EXACT) == []
+
+
 def test_sampler_is_seeded_and_sized() -> None:
     pool = [(f"t{i % 4}", i) for i in range(95)]
     a = sample_episodes(pool, 0.1, 3, seed=11)

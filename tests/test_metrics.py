@@ -115,6 +115,90 @@ def test_channel_stats_equal_pure_functions():
         assert stats.anomaly_detection_rate(b) == pytest.approx(M.anomaly_detection_rate(a, lab), rel=1e-12)
 
 
+def test_channel_stats_per_episode_nodes_equal_each_episode_alone():
+    rng = np.random.default_rng(1)
+    n_t, n_b, n, n_l = 6, 4, 4, 5
+    applied = rng.uniform(size=(n_t, n_b, n, n_l))
+    previous = np.concatenate([np.ones((1, n_b, n, n_l)), applied[:-1]])
+    valid = rng.uniform(size=applied.shape) < 0.7
+    label = (rng.uniform(size=applied.shape) < 0.3) & valid
+    nodes = np.array([[True, False, True, False], [False, True, True, True],
+                      [True, False, True, False], [True, True, False, False]])
+    batched = M.ChannelStats(n_b, nodes)
+    alone = [M.ChannelStats(1, nodes[b]) for b in range(n_b)]
+    for k in range(n_t):
+        batched.add(applied[k], previous[k], valid[k], label[k])
+        for b, one in enumerate(alone):
+            one.add(applied[k, b:b + 1], previous[k, b:b + 1], valid[k, b:b + 1], label[k, b:b + 1])
+    for b, one in enumerate(alone):  # bit for bit: verification re-runs single episodes
+        assert (batched.jitter(b), batched.weight_var(b), batched.anomaly_detection_rate(b)) == \
+            (one.jitter(0), one.weight_var(0), one.anomaly_detection_rate(0))
+        a, p, v = applied[:, b][:, nodes[b]], previous[:, b][:, nodes[b]], valid[:, b][:, nodes[b]]
+        assert batched.jitter(b) == pytest.approx(M.jitter(a, p, v), rel=1e-12)
+
+
+# --------------------------------------------------------------------------- recovery_s on synthetic traces
+
+DT = 0.1
+TIMES = DT * np.arange(1, 101)  # t = 0.1 … 10 s
+FAULT_END = 3.0                  # step 30 (index 29) is the first at the fault end
+
+
+def _trace(*segments: tuple[float, float, float]) -> np.ndarray:
+    """An error trace of ``TIMES``: ``(t0, t1, value)`` segments on [t0, t1), 0.5 m elsewhere."""
+    e = np.full(TIMES.shape, 0.5)
+    for t0, t1, value in segments:
+        e[(TIMES >= t0 - 1e-9) & (TIMES < t1 - 1e-9)] = value
+    return e
+
+
+def test_recovery_time_recovers_at_a_known_step():
+    # 20 m until 5.2 s, then back within 1 m: recovered 5.2 − 3.0 = 2.2 s after the fault end
+    seconds, recovered = M.recovery_time(_trace((0.0, 5.2, 20.0)), TIMES, FAULT_END, 1.0)
+    assert recovered and seconds == pytest.approx(2.2, abs=1e-12)
+
+
+def test_recovery_time_already_within_at_the_fault_end_is_zero():
+    # high during the fault only: the first step at t = 3.0 s is already within
+    assert M.recovery_time(_trace((1.0, 3.0, 20.0)), TIMES, FAULT_END, 1.0) == (pytest.approx(0.0, abs=1e-12), True)
+
+
+def test_recovery_time_never_recovers_is_censored_at_the_episode_end():
+    seconds, recovered = M.recovery_time(_trace((0.0, 11.0, 20.0)), TIMES, FAULT_END, 1.0)
+    assert not recovered and seconds == pytest.approx(10.0 - 3.0, abs=1e-12)
+    # a non-finite last error is not "within" either
+    seconds, recovered = M.recovery_time(_trace((9.95, 11.0, np.nan)), TIMES, FAULT_END, 1.0)
+    assert not recovered and seconds == pytest.approx(7.0, abs=1e-12)
+
+
+def test_recovery_time_relapse_counts_from_the_last_return():
+    # back within at 4 s, relapses on [6, 7.5) s, within again from 7.5 s: recovered 4.5 s after the end
+    e = _trace((0.0, 4.0, 20.0), (6.0, 7.5, 3.0))
+    seconds, recovered = M.recovery_time(e, TIMES, FAULT_END, 1.0)
+    assert recovered and seconds == pytest.approx(4.5, abs=1e-12)
+    # and a relapse that lasts to the end is never recovered
+    seconds, recovered = M.recovery_time(_trace((0.0, 4.0, 20.0), (6.0, 11.0, 3.0)), TIMES, FAULT_END, 1.0)
+    assert not recovered and seconds == pytest.approx(7.0, abs=1e-12)
+
+
+def test_recovery_time_threshold_is_inclusive_and_undefined_after_the_episode():
+    assert M.recovery_time(_trace((0.0, 5.0, 1.0)), TIMES, FAULT_END, 1.0)[0] == pytest.approx(0.0, abs=1e-12)
+    assert M.recovery_time(_trace(), TIMES, 10.5, 1.0) is None  # the fault outlasts the episode
+
+
+def test_recovery_is_the_slowest_faulty_uav_and_threshold_has_a_floor():
+    errors = np.stack([_trace((0.0, 4.0, 20.0)),           # faulty, recovers 1.0 s after its end (3 s)
+                       _trace((0.0, 11.0, 20.0)),          # healthy (no fault end): ignored
+                       _trace((0.0, 7.0, 20.0))], axis=1)  # faulty, its fault ends at 5 s: 2.0 s
+    ends = np.array([3.0, np.nan, 5.0])
+    assert M.recovery(errors, TIMES, ends, 1.0) == (pytest.approx(2.0, abs=1e-12), 1.0)
+    errors[-1, 0] = 20.0  # UAV 0 relapses at the last step: censored at 10 − 3 = 7 s
+    assert M.recovery(errors, TIMES, ends, 1.0) == (pytest.approx(7.0, abs=1e-12), 0.0)
+    assert M.recovery(errors, TIMES, np.full(3, np.nan), 1.0) is None
+    assert M.recovery_threshold(0.1) == 1.0 and M.recovery_threshold(0.5) == 1.5
+    assert M.recovery_threshold(None) == M.RECOVERY_FLOOR_M == 1.0
+
+
 def test_channel_stats_constant_trust_has_zero_variance():
     stats = M.ChannelStats(1, np.array([True, True]))
     a = np.full((1, 2, 3), 0.6)

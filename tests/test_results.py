@@ -54,6 +54,20 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
 
 
+def test_older_schema_reads_its_missing_metrics_as_null() -> None:
+    raw = json.loads(R.dumps_results(_results()))
+    assert raw["schema_version"] == R.SCHEMA_VERSION == 3
+    raw["schema_version"] = 2
+    for name in ("recovery_s", "recovered"):
+        for episode in raw["episodes"]:
+            del episode["metrics"][name]
+        for per_metric in raw["aggregates"].values():
+            del per_metric[name]
+    back = R.parse_results(json.dumps(raw))
+    assert back.schema_version == 2 and R.SCHEMA_METRICS[2] == R.METRIC_NAMES[:-2]
+    assert back.episodes[0].metrics.recovery_s is None and back.aggregates["swarmloc/Ideal-v0"]["recovered"] is None
+
+
 def test_write_is_atomic_on_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = R.write_results(tmp_path / "r.json", _results())
     before = path.read_bytes()
@@ -86,7 +100,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None
         (b"\xff\xfe garbage", "not UTF-8"),
         (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
-        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2 \\(the file was written by a newer swarmloc: upgrade"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3 \\(the file was written by a newer swarmloc: upgrade"),
     ],
 )
 def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:

@@ -42,11 +42,36 @@ def test_metric_definitions_per_task():
     m = out[0]
     assert m["fault_rmse"] is None and m["healthy_rmse"] is None and m["anomaly_detection_rate"] is None
     assert m["normalized_score"] is None  # no labels: oracle == uniform
+    assert m["recovery_s"] is None and m["recovered"] is None  # no IMU fault
     assert m["jitter"] == 0.0 and m["diverged"] == 0.0
     assert m["delay_ms"] > 0 and m["energy_j"] > 0
     rnd = evaluate_task(["uniform"], get_spec("swarmloc/CascadedFaultRandom-v0", duration=30.0),
                         [1_000_000, 1_000_001]).episodes["uniform"]
     assert all(e["healthy_rmse"] is not None and e["fault_rmse"] is not None for e in rnd)
+
+
+def test_per_episode_healthy_scoring_scores_exactly_the_healthy_uavs():
+    from swarmloc.envs.world import World
+
+    spec = get_spec("swarmloc/CascadedFaultRandom-v0", duration=41.0, scoring={"nodes_from_schedule": "healthy"})
+    seeds = [1_000_000, 1_000_001]
+    world = World(spec, len(seeds))
+    world.reset(np.array(seeds))
+    faulty = world.schedule.faulty_nodes
+    batched, _ = rollout(load_method("chi2-soft"), spec, seeds)
+    for b, seed in enumerate(seeds):
+        alone, trace = rollout(load_method("chi2-soft"), spec, [seed], trace=True)
+        assert alone[0] == batched[b]  # bit for bit, though the batch's episodes score different UAVs
+        healthy = ~faulty[b]
+        assert (trace.scored == healthy).all() and healthy.sum() == 2
+        e = np.linalg.norm(trace.estimate - trace.truth, axis=-1)  # (T, N)
+        assert alone[0]["rmse"] == pytest.approx(np.sqrt(np.mean(e[:, healthy] ** 2)), rel=1e-12)
+        assert alone[0]["max_error"] == pytest.approx(e[:, healthy].max(), rel=1e-12)
+        assert alone[0]["recovery_s"] is not None and alone[0]["recovered"] in (0.0, 1.0)
+    every, _ = rollout(load_method("chi2-soft"), get_spec("swarmloc/CascadedFaultRandom-v0", duration=41.0), seeds)
+    for m, v0 in zip(batched, every):  # only the scored set differs from v0's scoring
+        assert m["healthy_rmse"] == v0["healthy_rmse"] and m["recovery_s"] == v0["recovery_s"]
+        assert m["rmse"] != v0["rmse"]
 
 
 def _tiny_suite() -> Suite:

@@ -68,3 +68,17 @@ def test_nested_overrides_merge():
     spec = get_spec("swarmloc/NLOS-v0", sensors={"imu_sigma": 0.05})
     assert spec.sensors.imu_sigma == 0.05
     assert spec.sensors.anchor_sigma == get_spec("swarmloc/NLOS-v0").sensors.anchor_sigma
+
+
+def test_per_episode_healthy_scoring_is_validated():
+    healthy = {"nodes_from_schedule": "healthy"}
+    assert get_spec("swarmloc/CascadedFaultRandom-v0").scoring.nodes_from_schedule == "all"  # v0 unchanged
+    assert get_spec("swarmloc/CascadedFaultRandom-v0", scoring=healthy).scoring.nodes_from_schedule == "healthy"
+    with pytest.raises(ValidationError, match="needs an IMU fault"):
+        get_spec("swarmloc/Ideal-v0", scoring=healthy)
+    with pytest.raises(ValidationError, match="could score no UAV: 2 scored UAV"):
+        get_spec("swarmloc/CascadedFaultRandom-v0", scoring={**healthy, "nodes": (0, 1)})
+    with pytest.raises(ValidationError, match="could score no UAV: 0 scored UAV"):
+        get_spec("swarmloc/CascadedFault-v0", scoring={**healthy, "nodes": (1, 2)})
+    with pytest.raises(ValidationError, match="nodes_from_schedule"):
+        get_spec("swarmloc/CascadedFaultRandom-v0", scoring={"nodes_from_schedule": "faulty"})

@@ -4,8 +4,8 @@
 bound of ``swarmloc.envs.bound`` reduced to the numbers a results file compares with its
 metrics, on exactly the steps and UAVs that ``EpisodeRecorder`` scores:
 
-* ``rmse``: the bound on the ``rmse`` metric (the task's scored UAVs, steps from
-  ``scoring.start``);
+* ``rmse``: the bound on the ``rmse`` metric (the episode's scored UAVs, per episode where
+  the task scores each episode's healthy nodes, steps from ``scoring.start``);
 * ``healthy_rmse``: the bound on the ``healthy_rmse`` metric where the task defines it (the
   healthy UAVs over the fault window: CascadedFault, CascadedFaultRandom), else None.
 
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.bench.common.files import write_text_atomic
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.evaluation import selection
 from swarmloc.envs.bound import (
     BOUND_LABEL_SIGMAS,
     BOUND_VERSION,
@@ -78,40 +78,18 @@ class Bound:
 # --------------------------------------------------------------------------- scored steps and UAVs
 
 
-def scored_selection(spec: TaskSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Steps ``(T,)`` and UAVs ``(N,)`` the ``rmse`` metric scores (``EpisodeRecorder``'s choice).
+def scored_selection(spec: TaskSpec, schedule=None, b: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Steps ``(T,)`` and UAVs ``(N,)`` the ``rmse`` metric scores in episode b (``EpisodeRecorder``'s choice).
 
-    Update k (0-based) is at time (k + 1)·dt; it is scored from ``scoring.start`` on.
+    Update k (0-based) is at time (k + 1)·dt; it is scored from ``scoring.start`` on. The
+    UAVs are the task's scored nodes, and with ``scoring.nodes_from_schedule="healthy"``
+    those episode b's ``schedule`` leaves healthy (``swarmloc.bench.evaluation.selection``).
     """
-    times = spec.dt * np.arange(1, spec.n_steps + 1)
-    steps = times >= spec.scoring.start - 1e-9
-    nodes = np.zeros(spec.n_uav, dtype=bool)
-    nodes[list(spec.scored_nodes)] = True
-    return steps, nodes
+    return selection.scored_steps(spec), selection.scored_nodes(spec, schedule, b)
 
 
-def healthy_selection(spec: TaskSpec, schedule, b: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """UAVs ``(N,)`` and steps ``(T,)`` the ``healthy_rmse`` metric scores in episode b, or None.
-
-    The same rule as ``EpisodeRecorder``: the spec's healthy nodes over its fault window (or
-    over the episode's IMU-fault span), or, for a randomised cascade, the nodes without an
-    IMU fault over the fault span.
-    """
-    times = spec.dt * np.arange(1, spec.n_steps + 1)
-    steps_ok, _ = scored_selection(spec)
-    s = spec.scoring
-    if s.healthy_nodes:
-        healthy = np.zeros(spec.n_uav, dtype=bool)
-        healthy[list(s.healthy_nodes)] = True
-        if s.fault_window is not None:
-            return healthy, M.window_steps(times, s.fault_window) & steps_ok
-        span = schedule.imu_fault_span()[b] if schedule is not None else np.full(2, np.nan)
-        window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
-        return healthy, (M.window_steps(times, window) if window else steps_ok) & steps_ok
-    if spec.faults.imu_cascade_random is not None and schedule is not None:
-        span = schedule.imu_fault_span()[b]
-        return ~schedule.faulty_nodes[b], M.window_steps(times, (float(span[0]), float(span[1]))) & steps_ok
-    return None
+#: UAVs and steps of the ``healthy_rmse`` metric in one episode (the recorder's own rule)
+healthy_selection = selection.healthy_selection
 
 
 # --------------------------------------------------------------------------- computing
@@ -143,7 +121,8 @@ def bounds_from_inputs(spec: TaskSpec, seeds: Sequence[int], inputs: BoundInputs
         spec: the task; seeds: ``(B,)`` the episodes' seeds.
         inputs: their ``BoundInputs`` (B episodes, in the order of ``seeds``).
         schedule: the world's ``FaultSchedule`` of those episodes (``world.schedule``; None for
-            a world without one), which the ``healthy_rmse`` selection of some tasks needs.
+            a world without one), which the ``healthy_rmse`` selection and a per-episode scored set
+            (``scoring.nodes_from_schedule``) need.
 
     Returns:
         One ``Bound`` per seed.
@@ -153,7 +132,6 @@ def bounds_from_inputs(spec: TaskSpec, seeds: Sequence[int], inputs: BoundInputs
     if why is not None:
         return [Bound(spec.task_id, s, None, None, why) for s in seeds]
     out = pcrlb(inputs)
-    steps, nodes = scored_selection(spec)
     bounds = []
     for b, seed in enumerate(seeds):
         k = int(out.failed_at[b])
@@ -163,6 +141,7 @@ def bounds_from_inputs(spec: TaskSpec, seeds: Sequence[int], inputs: BoundInputs
             bounds.append(Bound(spec.task_id, seed, None, None, reason))
             continue
         pos_var = out.pos_var[:, b]
+        steps, nodes = scored_selection(spec, schedule, b)
         healthy = healthy_selection(spec, schedule, b)
         healthy_value = None
         if healthy is not None and healthy[0].any() and healthy[1].any():

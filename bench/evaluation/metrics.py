@@ -1,8 +1,11 @@
 """Per-episode metrics (docs/scoring.md): small pure functions, one per metric.
 
-Every metric is computed on the task's *scored nodes* (``spec.scored_nodes``) and
-*scored interval* (steps with ``t ≥ spec.scoring.start``), from the position error
-e = ‖p̂ − p‖ [m] of every scored UAV at every filter update k = 1 … T (t = k·dt):
+Every metric is computed on the episode's *scored nodes* (``spec.scored_nodes``; with
+``scoring.nodes_from_schedule="healthy"`` only those the episode's fault schedule leaves
+without an IMU fault, ``swarmloc.bench.evaluation.selection``) and *scored interval* (steps
+with ``t ≥ spec.scoring.start``), from the position error e = ‖p̂ − p‖ [m] of every scored
+UAV at every filter update k = 1 … T (t = k·dt); ``healthy_rmse``, ``recovery_s`` and
+``recovered`` select their own UAVs, as stated:
 
 | metric | definition |
 |---|---|
@@ -11,6 +14,8 @@ e = ‖p̂ − p‖ [m] of every scored UAV at every filter update k = 1 … T (
 | ``cep90`` | 90th percentile of the 3-D error (spherical error probable, 90 %) |
 | ``fault_rmse`` | RMSE inside ``scoring.fault_window``; if the task defines none, over the steps where any scored UAV has a labelled channel; null if there are none |
 | ``healthy_rmse`` | RMSE of the healthy nodes during the fault: ``scoring.healthy_nodes`` inside the fault window, or, for a randomised IMU cascade, the UAVs the episode's schedule leaves healthy inside its fault span; null where the task defines neither |
+| ``recovery_s`` | for the episode's faulty UAVs (whatever is scored): time [s] from the end of a UAV's IMU fault to the first step from which its error stays ≤ max(3 × RMSE of the UAVs without an IMU fault over the scored steps before the fault, 1 m) to the end of the episode; the slowest faulty UAV's. Never recovered: censored at the episode's end (t_last − fault end), so the mean is the restricted mean recovery time; null without an IMU fault (or one that ends with the episode) |
+| ``recovered`` | 1.0 if every faulty UAV recovered (``recovery_s`` not censored), else 0.0 (the mean is the fraction recovered); null where ``recovery_s`` is |
 | ``diverged`` | 1.0 if e > 10 m at any step, else 0.0 |
 | ``delay_ms`` | mean compute time per UAV-step [ms] on the processor profile (filter + method FLOPs); the schema has one field, so the mean |
 | ``energy_j`` | energy per UAV over the episode [J] (sum over steps, mean over UAVs) |
@@ -43,6 +48,10 @@ DETECTION_TRUST = 0.5
 MIN_SCORE_GAP_M = 1e-3
 #: percentile of the error reported as CEP90
 CEP_PERCENTILE = 90.0
+#: a faulty UAV has recovered once its error stays within this many times the healthy UAVs' RMSE …
+RECOVERY_FACTOR = 3.0
+#: … or within this floor [m], whichever is larger (a healthy swarm at centimetres is not the bar)
+RECOVERY_FLOOR_M = 1.0
 
 
 def position_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -142,6 +151,72 @@ def healthy_rmse(errors: np.ndarray, healthy: np.ndarray, steps: np.ndarray) -> 
     return rmse(np.asarray(errors)[steps][:, healthy])
 
 
+def recovery_threshold(healthy_level: float | None, factor: float = RECOVERY_FACTOR,
+                       floor: float = RECOVERY_FLOOR_M) -> float:
+    """The error [m] a faulty UAV must get back within: max(factor × healthy_level, floor).
+
+    Args:
+        healthy_level: RMSE of the episode's healthy UAVs [m] (None or not finite: the floor alone).
+        factor, floor: the rule's constants.
+    """
+    if healthy_level is None or not np.isfinite(healthy_level):
+        return float(floor)
+    return float(max(factor * healthy_level, floor))
+
+
+def recovery_time(errors: np.ndarray, times: np.ndarray, fault_end: float,
+                  threshold: float) -> tuple[float, bool] | None:
+    """Time from a UAV's fault end until its error is within ``threshold`` for good.
+
+    Over the steps at or after the fault end (t ≥ ``fault_end``), the recovery step is the
+    first one from which every error is ≤ ``threshold`` to the end of the episode; the
+    time is its t − ``fault_end``. A UAV whose last error is above the threshold (or not
+    finite) never recovered: its time is censored at the episode's end, t_last − fault_end.
+
+    Args:
+        errors: ``(T,)`` one UAV's errors [m]; times: ``(T,)`` their step times [s].
+        fault_end: end of the UAV's IMU fault [s].
+        threshold: the recovery threshold [m].
+
+    Returns:
+        ``(seconds, recovered)``, or None when no step is at or after the fault end.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    after = times >= fault_end - 1e-9  # the same micro-step tolerance as window_steps
+    if not after.any():
+        return None
+    t, e = times[after], np.asarray(errors, dtype=np.float64)[after]
+    # "not within" rather than "above", so a NaN error counts as not recovered
+    out = np.flatnonzero(~(e <= threshold))
+    if out.size == 0:
+        return float(t[0] - fault_end), True
+    if out[-1] == e.size - 1:
+        return float(t[-1] - fault_end), False
+    return float(t[out[-1] + 1] - fault_end), True
+
+
+def recovery(errors: np.ndarray, times: np.ndarray, fault_ends: np.ndarray,
+             threshold: float) -> tuple[float, float] | None:
+    """``recovery_s`` and ``recovered`` of one episode: the slowest of its faulty UAVs.
+
+    Args:
+        errors: ``(T, N)`` errors of every UAV; times: ``(T,)`` step times [s].
+        fault_ends: ``(N,)`` end of each UAV's IMU fault [s], NaN for a UAV without one.
+        threshold: the recovery threshold [m] (:func:`recovery_threshold`).
+
+    Returns:
+        ``(max over faulty UAVs of their recovery time, 1.0 if all recovered else 0.0)``, or
+        None when no UAV has an IMU fault that ends before the episode does.
+    """
+    errors = np.asarray(errors)
+    found = [recovery_time(errors[:, i], times, float(end), threshold)
+             for i, end in enumerate(np.asarray(fault_ends, dtype=np.float64)) if np.isfinite(end)]
+    found = [r for r in found if r is not None]
+    if not found:
+        return None
+    return max(r[0] for r in found), float(all(r[1] for r in found))
+
+
 def diverged(errors: np.ndarray, threshold: float = DIVERGENCE_M) -> float:
     """1.0 if any error exceeds ``threshold`` [m] (or is not finite), else 0.0."""
     e = _values(errors)
@@ -216,6 +291,19 @@ def normalized_score(rmse_method: float, rmse_uniform: float, rmse_oracle: float
     return float((rmse_uniform - rmse_method) / gap)
 
 
+def node_groups(nodes: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Episodes that score the same UAVs, to be reduced together.
+
+    Args:
+        nodes: ``(B, N)`` bool, each episode's scored UAVs.
+
+    Returns:
+        ``[(episode indices, (N,) mask)]``, one entry per distinct row of ``nodes``.
+    """
+    masks, which = np.unique(np.asarray(nodes, dtype=bool), axis=0, return_inverse=True)
+    return [(np.flatnonzero(which.ravel() == g), mask) for g, mask in enumerate(masks)]
+
+
 class ChannelStats:
     """Streaming sums behind ``jitter``, ``weight_var`` and ``anomaly_detection_rate``.
 
@@ -226,11 +314,14 @@ class ChannelStats:
 
     Args:
         batch_size: B.
-        nodes: ``(N,)`` bool, the scored UAVs.
+        nodes: ``(N,)`` bool, the scored UAVs, or ``(B, N)``, each episode's own
+            (``scoring.nodes_from_schedule="healthy"``).
     """
 
     def __init__(self, batch_size: int, nodes: np.ndarray) -> None:
-        self.nodes = np.asarray(nodes, dtype=bool)
+        nodes = np.asarray(nodes, dtype=bool)
+        self.nodes = np.broadcast_to(nodes, (batch_size, nodes.shape[-1]))
+        self.groups = node_groups(self.nodes)
         z = lambda: np.zeros(batch_size)  # noqa: E731
         self.n_valid, self.abs_delta, self.alpha_sum, self.alpha_sq = z(), z(), z(), z()
         self.n_label, self.n_detected = z(), z()
@@ -241,23 +332,34 @@ class ChannelStats:
     def add(self, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray, label: np.ndarray) -> None:
         """Add one step (``(B, N, L)`` arrays) of the scored interval."""
         n_b = applied.shape[0]
+        for idx, nodes in self.groups:
+            rows = slice(None) if len(idx) == n_b else idx
+            self._add_rows(rows, applied[rows][:, nodes], previous[rows][:, nodes], valid[rows][:, nodes],
+                           label[rows][:, nodes])
+
+    def _add_rows(self, rows: slice | np.ndarray, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray,
+                  label: np.ndarray) -> None:
+        """Add the ``(B_rows, N_scored, L)`` arrays of the episodes ``rows``."""
+        n_b = applied.shape[0]
         # rows (B, N_scored·L), reduced along the contiguous last axis: each episode's sum
         # is computed the same way whatever B is (bit-identical alone or batched)
-        m = valid[:, self.nodes].reshape(n_b, -1)
-        a = applied[:, self.nodes].reshape(n_b, -1)
-        p = previous[:, self.nodes].reshape(n_b, -1)
-        lab = label[:, self.nodes].reshape(n_b, -1) & m
+        m = valid.reshape(n_b, -1)
+        a = applied.reshape(n_b, -1)
+        p = previous.reshape(n_b, -1)
+        lab = label.reshape(n_b, -1) & m
         count = m.sum(axis=1)
-        first = np.isnan(self.shift) & (count > 0)
+        shift = self.shift[rows]
+        first = np.isnan(shift) & (count > 0)
         if first.any():
-            self.shift[first] = (a * m).sum(axis=1)[first] / count[first]
-        d = a - np.nan_to_num(self.shift)[:, None]
-        self.n_valid += count
-        self.abs_delta += (np.abs(a - p) * m).sum(axis=1)
-        self.alpha_sum += (d * m).sum(axis=1)
-        self.alpha_sq += (d * d * m).sum(axis=1)
-        self.n_label += lab.sum(axis=1)
-        self.n_detected += ((a < DETECTION_TRUST) & lab).sum(axis=1)
+            shift[first] = (a * m).sum(axis=1)[first] / count[first]
+            self.shift[rows] = shift
+        d = a - np.nan_to_num(shift)[:, None]
+        self.n_valid[rows] += count
+        self.abs_delta[rows] += (np.abs(a - p) * m).sum(axis=1)
+        self.alpha_sum[rows] += (d * m).sum(axis=1)
+        self.alpha_sq[rows] += (d * d * m).sum(axis=1)
+        self.n_label[rows] += lab.sum(axis=1)
+        self.n_detected[rows] += ((a < DETECTION_TRUST) & lab).sum(axis=1)
 
     def jitter(self, b: int) -> float | None:
         """Episode b's jitter (None without valid channel-steps)."""

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.evaluation import selection
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.bench.evaluation.traces import Trace
 from swarmloc.envs.reward import RewardTerms, standard_reward, team_reward
@@ -34,10 +35,11 @@ class EpisodeRecorder:
                  with_trust: bool, with_flops: bool, trace: bool) -> None:
         n_t, n_b, n = spec.n_steps, len(seeds), spec.n_uav
         self.spec, self.seeds, self.schedule = spec, seeds, schedule
-        self.times = spec.dt * np.arange(1, n_t + 1)
-        self.scored_steps = self.times >= spec.scoring.start - 1e-9
-        self.nodes = np.zeros(n, dtype=bool)
-        self.nodes[list(spec.scored_nodes)] = True
+        self.times = selection.step_times(spec)
+        self.scored_steps = selection.scored_steps(spec)
+        #: (B, N) the UAVs each episode scores (the same row in every episode unless the scored set is per episode)
+        self.nodes = selection.scored_node_masks(spec, schedule, n_b)
+        self.node_groups = M.node_groups(self.nodes)
         self.errors = np.zeros((n_t, n_b, n))
         # anchor-free tasks are scored after a yaw + translation alignment (bench/evaluation/alignment.py),
         # which needs the whole episode: keep the positions and align once at the end
@@ -76,7 +78,7 @@ class EpisodeRecorder:
         self.errors[k] = M.position_errors(estimate, truth)
         if self._positions is not None:
             self._positions[0][k], self._positions[1][k] = estimate, truth
-        self.label_steps[k] = label[:, self.nodes].any(axis=(1, 2))
+        self.label_steps[k] = (label & self.nodes[:, :, None]).any(axis=(1, 2))
         if terms is None:
             # the reward counts every valid channel as used when the method exposes no trust
             a = applied if applied is not None else np.ones(valid.shape)
@@ -88,8 +90,10 @@ class EpisodeRecorder:
             if flops is not None:
                 # a boolean-masked (B, nodes) copy is not C-contiguous for B > 1, and numpy would sum it in
                 # another order than for B = 1: an episode's metrics must not depend on its batch
-                self.delay_ms += np.ascontiguousarray(terms.delay_ms[:, self.nodes]).mean(axis=1)
-                self.energy_j += np.ascontiguousarray(terms.energy_j[:, self.nodes]).mean(axis=1)
+                for idx, nodes in self.node_groups:
+                    rows = slice(None) if len(idx) == len(self.seeds) else idx
+                    self.delay_ms[rows] += np.ascontiguousarray(terms.delay_ms[rows][:, nodes]).mean(axis=1)
+                    self.energy_j[rows] += np.ascontiguousarray(terms.energy_j[rows][:, nodes]).mean(axis=1)
             if self.stats is not None and applied is not None and previous is not None:
                 self.stats.add(applied, previous, valid, label)
         if self.trace is not None:
@@ -99,23 +103,20 @@ class EpisodeRecorder:
             if tr["applied"] is not None and applied is not None:
                 tr["applied"][k] = applied[0]
 
-    def _healthy(self, b: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Healthy UAVs and the steps they are scored on, or None where undefined."""
-        s, steps_ok = self.spec, self.scored_steps
-        sched = self.schedule
-        if s.scoring.healthy_nodes:
-            healthy = np.zeros(s.n_uav, dtype=bool)
-            healthy[list(s.scoring.healthy_nodes)] = True
-            if s.scoring.fault_window is not None:
-                return healthy, M.window_steps(self.times, s.scoring.fault_window) & steps_ok
-            span = sched.imu_fault_span()[b] if sched is not None else np.full(2, np.nan)
-            window = None if np.isnan(span).any() else (float(span[0]), float(span[1]))
-            return healthy, (M.window_steps(self.times, window) if window else steps_ok) & steps_ok
-        if s.faults.imu_cascade_random is not None and sched is not None:
-            healthy = ~sched.faulty_nodes[b]
-            span = sched.imu_fault_span()[b]
-            return healthy, M.window_steps(self.times, (float(span[0]), float(span[1]))) & steps_ok
-        return None
+    def _recovery(self, b: int) -> tuple[float, float] | None:
+        """``(recovery_s, recovered)`` of episode b, or None without an IMU fault that ends inside it.
+
+        The threshold's healthy level is the RMSE of the UAVs without an IMU fault over the
+        scored steps before the first fault starts: the accuracy the swarm had before the
+        fault (during and after it the healthy UAVs may be dragged off too).
+        """
+        ends = selection.imu_fault_ends(self.schedule, b, self.spec.n_uav)
+        if not np.isfinite(ends).any():
+            return None
+        healthy = ~np.isfinite(ends)
+        before = self.scored_steps & (self.times < float(self.schedule.imu_fault_span()[b][0]) - 1e-9)
+        level = M.rmse(self.errors[before, b][:, healthy]) if healthy.any() and before.any() else None
+        return M.recovery(self.errors[:, b], self.times, ends, M.recovery_threshold(level))
 
     def _apply_alignment(self) -> None:
         """Replace the errors by those after the task's scoring alignment (once, at the end)."""
@@ -130,12 +131,13 @@ class EpisodeRecorder:
         self._apply_alignment()
         s = self.spec
         steps = self.scored_steps
-        e = self.errors[steps][:, b][:, self.nodes]
+        e = self.errors[steps][:, b][:, self.nodes[b]]
         if s.scoring.fault_window is not None:
             fault_steps = M.window_steps(self.times, s.scoring.fault_window)[steps]
         else:
             fault_steps = self.label_steps[steps, b]
-        healthy = self._healthy(b)
+        healthy = selection.healthy_selection(s, self.schedule, b)
+        recovery = self._recovery(b)
         n_scored = max(int(steps.sum()), 1)
         out: dict[str, float | None] = {
             "rmse": M.rmse(e),
@@ -155,6 +157,8 @@ class EpisodeRecorder:
             "normalized_score": None,
             "uniform_rmse": None,
             "bound_rmse": None,
+            "recovery_s": None if recovery is None else recovery[0],
+            "recovered": None if recovery is None else recovery[1],
         }
         return out
 
@@ -166,6 +170,6 @@ class EpisodeRecorder:
         if window is None and self.spec.faults.imu_cascade_random is not None and self.schedule is not None:
             window = tuple(self.schedule.imu_fault_span()[0])
         return Trace(method=method, task=self.spec.task_id, seed=int(self.seeds[0]), times=self.times.copy(),
-                     kind=np.asarray(layout_kind), scored=self.nodes.copy(),
+                     kind=np.asarray(layout_kind), scored=self.nodes[0].copy(),
                      fault_window=np.array(window if window is not None else (np.nan, np.nan), dtype=float),
                      **self.trace)

@@ -3,7 +3,7 @@
 One JSON document per (method, suite) evaluation, with exactly this top-level shape::
 
     {
-      "schema_version": 2,
+      "schema_version": 3,
       "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
       "suite":      {"name", "version", "sha256"},
       "provenance": {"package_version", "git_commit", "created_utc",
@@ -46,14 +46,15 @@ from pydantic import (
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
 
-SCHEMA_VERSION: Literal[2] = 2
+SCHEMA_VERSION: Literal[3] = 3
 """Version of the results-file schema written by this module; bump on any change.
 
 Version history: 1 — v0 metrics; 2 — adds ``uniform_rmse`` (the standard CEKF on the same
-episode, the reference of score v1) and ``bound_rmse`` (the episode's information bound).
+episode, the reference of score v1) and ``bound_rmse`` (the episode's information bound);
+3 — adds ``recovery_s`` and ``recovered`` (the faulty UAVs' recovery after an IMU fault).
 """
-#: schema versions this module reads (a version-1 file reads with the version-2 metrics null)
-READABLE_SCHEMA_VERSIONS = (1, 2)
+#: schema versions this module reads (an older file reads with the metrics it lacks null)
+READABLE_SCHEMA_VERSIONS = (1, 2, 3)
 
 METRIC_NAMES: tuple[str, ...] = (
     "rmse",
@@ -73,10 +74,18 @@ METRIC_NAMES: tuple[str, ...] = (
     "normalized_score",
     "uniform_rmse",
     "bound_rmse",
+    "recovery_s",
+    "recovered",
 )
 """Every per-episode metric, in the order they appear in results files."""
 METRIC_NAMES_V1: tuple[str, ...] = METRIC_NAMES[:METRIC_NAMES.index("uniform_rmse")]
 """The metrics of schema version 1."""
+SCHEMA_METRICS: dict[int, tuple[str, ...]] = {
+    1: METRIC_NAMES_V1,
+    2: METRIC_NAMES[:METRIC_NAMES.index("recovery_s")],
+    3: METRIC_NAMES,
+}
+"""The metrics a results file of each schema version holds (the others read as null)."""
 
 AGGREGATE_FIELDS: tuple[str, ...] = ("mean", "iqm", "ci_low", "ci_high")
 """Statistics kept per (task, metric): mean, interquartile mean, 95 % bootstrap CI of the mean."""
@@ -159,6 +168,8 @@ class EpisodeMetrics(BaseModel):
     normalized_score: MetricValue
     uniform_rmse: MetricValue = None
     bound_rmse: MetricValue = None
+    recovery_s: MetricValue = None
+    recovered: MetricValue = None
 
     @classmethod
     def of(cls, **known: float | None) -> EpisodeMetrics:
@@ -253,7 +264,7 @@ class Results(BaseModel):
 
     model_config = _FROZEN
 
-    schema_version: Literal[1, 2] = SCHEMA_VERSION
+    schema_version: Literal[1, 2, 3] = SCHEMA_VERSION
     method: MethodInfo
     suite: SuiteInfo
     provenance: Provenance
@@ -263,10 +274,11 @@ class Results(BaseModel):
 
     @model_validator(mode="before")
     @classmethod
-    def _read_version_1(cls, raw: Any) -> Any:
-        """A version-1 file has no version-2 metrics: they read as null (aggregates included)."""
-        if isinstance(raw, dict) and raw.get("schema_version") == 1 and isinstance(raw.get("aggregates"), dict):
-            added = {name: None for name in METRIC_NAMES if name not in METRIC_NAMES_V1}
+    def _read_older_versions(cls, raw: Any) -> Any:
+        """An older file lacks the later versions' metrics: they read as null (aggregates included)."""
+        version = raw.get("schema_version") if isinstance(raw, dict) else None
+        if version in SCHEMA_METRICS and version != SCHEMA_VERSION and isinstance(raw.get("aggregates"), dict):
+            added = {name: None for name in METRIC_NAMES if name not in SCHEMA_METRICS[version]}
             raw = {**raw, "aggregates": {task: ({**added, **per} if isinstance(per, dict) else per)
                                          for task, per in raw["aggregates"].items()}}
         return raw
@@ -489,6 +501,7 @@ __all__ = [
     "EpisodeMetrics",
     "MachineInfo",
     "MethodInfo",
+    "SCHEMA_METRICS",
     "Provenance",
     "Results",
     "ResultsFileError",

@@ -20,6 +20,7 @@ import numpy as np
 
 from swarmloc.agents.protocols import TrustInput, episode_keys
 from swarmloc.agents.registry import LoadedMethod, load_method
+from swarmloc.bench.evaluation.selection import scored_node_masks
 from swarmloc.envs.channels import ChannelLayout
 from swarmloc.envs.observation import N_FEATURES
 from swarmloc.envs.specs import TaskSpec
@@ -44,6 +45,8 @@ class Episode:
         trust: ``(T, B, N, L)`` trust the method returned (clipped to [0, 1], as applied).
         label: ``(T, B, N, L)`` fault labels of the measurements (analysis only).
         error: ``(T, B, N)`` position error ‖p̂ − p‖ after each update [m].
+        scored: ``(B, N)`` the UAVs each episode scores (per episode where the task scores
+            each episode's healthy UAVs; ``swarmloc.bench.evaluation.selection``).
     """
 
     spec: TaskSpec
@@ -61,6 +64,7 @@ class Episode:
     trust: np.ndarray
     label: np.ndarray
     error: np.ndarray
+    scored: np.ndarray
 
     @property
     def n_steps(self) -> int:
@@ -151,4 +155,5 @@ def replay(method: str | LoadedMethod, spec: TaskSpec, seeds: Sequence[int]) -> 
         error[k] = env.position_error()
     return Episode(spec=spec, seeds=seeds_arr, layout=layout, method=loaded.name, times=times, obs=obs,
                    resid=rec["resid"], pred=rec["pred"], nis=rec["nis"], applied=rec["applied"], jerk=jerk,
-                   valid=valid, trust=rec["trust"], label=label, error=error)
+                   valid=valid, trust=rec["trust"], label=label, error=error,
+                   scored=scored_node_masks(spec, getattr(env.core.world, "schedule", None), n_b))

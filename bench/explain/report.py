@@ -46,8 +46,7 @@ def fault_window(episode: Episode) -> tuple[float, float] | None:
 def window_rmse(episode: Episode, window: tuple[float, float] | None) -> float | None:
     """RMSE of the scored UAVs' errors inside the window (all episodes pooled), None without one."""
     inside = M.window_steps(episode.times, window)
-    nodes = list(episode.spec.scored_nodes)
-    return M.fault_rmse(episode.error[:, :, nodes].reshape(episode.n_steps, -1), inside)
+    return M.fault_rmse(episode.error[:, episode.scored], inside)
 
 
 def _mean(values: np.ndarray) -> float | None:
