@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .channels import ANCHOR, PEER, PEER_REL, TDOA, ChannelLayout
-from .rng import Stream, uniform
+from .rng import Stream, normal, uniform
 from .specs import TaskSpec
 
 BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
@@ -24,7 +24,9 @@ HYBRID_WEIGHTED_SUM, HYBRID_MIXTURE = 0, 1
 
 
 #: schedule fields that describe the task, not an episode (no leading batch axis)
-PER_TASK_FIELDS = ("gm_mask", "gm_param", "hybrid_nodes", "hybrid_param", "packet_loss")
+PER_TASK_FIELDS = ("hybrid_nodes", "hybrid_param", "packet_loss")
+#: index offset of the per-episode Gauss–Markov draws in the schedule stream (clear of the others)
+GM_DRAWS = 3_000_000
 
 
 class FaultSchedule(NamedTuple):
@@ -45,12 +47,15 @@ class FaultSchedule(NamedTuple):
             range / peer channels each window silences.
         drift_time: ``(B, Wg, 2)`` GPS drift windows; ``drift_rate`` ``(B, Wg, 3)`` [m/s];
             ``drift_nodes`` ``(B, Wg, N)``.
-        gm_mask: ``(N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(6,)``
-            [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias].
+        gm_mask: ``(B, N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(B, 6)``
+            [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias] (per episode:
+            a randomized scenario draws them from the seed).
         hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(6,)``
             [ratio, t_scale, gauss_sigma, dof_low, dof_high, model] (model
             ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``).
         packet_loss: probability a valid measurement is lost.
+        landmark_offset: ``(B, M, 3)`` error of the landmark map: landmark m truly sits at its
+            public position + ``landmark_offset[b, m]`` [m] (``Sensors.landmark_map_sigma``).
     """
 
     bias_time: np.ndarray
@@ -72,6 +77,7 @@ class FaultSchedule(NamedTuple):
     hybrid_nodes: np.ndarray
     hybrid_param: np.ndarray
     packet_loss: float
+    landmark_offset: np.ndarray
 
     @property
     def faulty_nodes(self) -> np.ndarray:
@@ -199,13 +205,25 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         drift_rows.append((np.tile([d.start, d.end], (n_b, 1)), np.tile(d.rate * direction, (n_b, 1)),
                            np.broadcast_to(_node_mask(d.nodes, n), (n_b, n)).copy()))
 
-    gm_mask = np.zeros((n, n_l), dtype=np.bool_)
-    gm_param = np.zeros(6)
+    gm_mask = np.zeros((n_b, n, n_l), dtype=np.bool_)
+    gm_param = np.zeros((n_b, 6))
     if f.nlos_gauss_markov is not None:
         g = f.nlos_gauss_markov
         kinds = [ANCHOR, TDOA] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
-        gm_mask = np.isin(layout.kind, kinds) & layout.linked & _node_mask(g.nodes, n)[:, None]
-        gm_param = np.array([g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias])
+        eligible = np.isin(layout.kind, kinds) & layout.linked & _node_mask(g.nodes, n)[:, None]
+        gm_mask[:] = eligible
+        gm_param[:] = [g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias]
+        for b, seed in enumerate(seeds):
+            draw = lambda k: uniform(int(seed), 0, Stream.SCHEDULE, GM_DRAWS + k)  # noqa: E731
+            if g.onset_rate_range is not None:
+                lo, hi = g.onset_rate_range
+                gm_param[b, 0] = lo + (hi - lo) * draw(0)
+            if g.mean_bias_range is not None:
+                lo, hi = g.mean_bias_range
+                gm_param[b, 2] = lo * (hi / lo) ** draw(1)
+            if g.link_fraction < 1.0:
+                prone = np.array([[draw(2 + i * n_l + l) < g.link_fraction for l in range(n_l)] for i in range(n)])
+                gm_mask[b] = eligible & prone
 
     hybrid_nodes = np.zeros(n, dtype=np.bool_)
     hybrid_param = np.zeros(6)
@@ -240,4 +258,21 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         hybrid_nodes=hybrid_nodes,
         hybrid_param=hybrid_param,
         packet_loss=float(f.packet_loss),
+        landmark_offset=_landmark_offsets(spec, seeds),
     )
+
+
+#: index offset of the landmark-map draws in the schedule stream (clear of the others)
+MAP_DRAWS = 4_000_000
+
+
+def _landmark_offsets(spec: TaskSpec, seeds: np.ndarray) -> np.ndarray:
+    """``(B, M, 3)`` per-episode landmark map errors, N(0, σ_map²) per axis, from the episode seed."""
+    n_m, sigma = len(spec.landmarks), spec.sensors.landmark_map_sigma
+    out = np.zeros((len(seeds), n_m, 3))
+    if sigma > 0.0:
+        for b, seed in enumerate(seeds):
+            for m in range(n_m):
+                for d in range(3):
+                    out[b, m, d] = sigma * normal(int(seed), 0, Stream.SCHEDULE, MAP_DRAWS + 3 * m + d)
+    return out

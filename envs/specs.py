@@ -186,6 +186,11 @@ class Sensors(Frozen):
     peers: PeerLinks = PeerLinks()
     camera_sigma: PositiveFloat = 0.15
     camera_max_range: PositiveFloat = 10.0
+    camera_fov_deg: Annotated[float, Field(gt=0.0, le=360.0)] = Field(
+        default=360.0, description="camera field of view [deg], centred on the UAV's velocity; 360 = omnidirectional")
+    landmark_map_sigma: NonNegFloat = Field(
+        default=0.0, description="error std per axis of the landmark map (the public landmark positions), drawn per "
+                                 "episode [m]; 0 = the map is exact")
     gps_sigma: tuple[PositiveFloat, ...] = Field(default=(), description="per-UAV GPS std [m]; empty = no GPS")
     velocity_sigma: PositiveFloat | None = Field(
         default=None, description="visual odometry: world-frame velocity std per axis [m/s]; None = no VO")
@@ -222,6 +227,12 @@ class NlosGaussMarkov(Frozen):
     exponential time of mean ``mean_duration``; during it the bias follows a first-order
     Gauss–Markov process around ``mean_bias`` with time constant ``tau`` and stationary
     std ``bias_sigma``, clipped to [0, max_bias].
+
+    Randomized scenarios (the ``*Random`` tasks) draw per episode, from the episode seed:
+    the onset rate uniformly in ``onset_rate_range``, the mean bias log-uniformly in
+    ``mean_bias_range`` (NLOS excess delays span an order of magnitude), and which of the
+    eligible links are NLOS-prone at all (each with probability ``link_fraction``). A
+    range left ``None`` keeps the fixed value.
     """
 
     targets: tuple[Literal["anchor", "peer"], ...] = ("anchor", "peer")
@@ -232,6 +243,20 @@ class NlosGaussMarkov(Frozen):
     bias_sigma: NonNegFloat = 1.0
     tau: PositiveFloat = 2.0
     max_bias: PositiveFloat = 5.0
+    onset_rate_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
+        default=None, description="per-episode onset rate, uniform in [low, high] [1/s]; None = onset_rate")
+    mean_bias_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
+        default=None, description="per-episode mean bias, log-uniform in [low, high] [m]; None = mean_bias")
+    link_fraction: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
+        default=1.0, description="probability that an eligible link is NLOS-prone in an episode (drawn per episode)")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "NlosGaussMarkov":
+        for name in ("onset_rate_range", "mean_bias_range"):
+            r = getattr(self, name)
+            if r is not None and r[1] < r[0]:
+                raise ValueError(f"{name}={r}: low must be <= high")
+        return self
 
 
 class NlosUniform(Frozen):
@@ -374,6 +399,10 @@ class Scoring(Frozen):
     """
 
     nodes: tuple[int, ...] = Field(default=(), description="scored UAVs; empty = all")
+    nodes_from_schedule: Literal["all", "healthy"] = Field(
+        default="all",
+        description="'all': every episode scores `nodes`; 'healthy': only those of `nodes` the episode's fault "
+                    "schedule leaves without an IMU fault (needs an IMU fault)")
     healthy_nodes: tuple[int, ...] = Field(default=(), description="nodes for healthy-node RMSE; empty = not defined")
     fault_window: tuple[float, float] | None = None
     start: NonNegFloat = 0.0
@@ -399,10 +428,6 @@ class TaskSpec(Frozen):
     filter: FilterSettings = FilterSettings()
     scoring: Scoring = Scoring()
 
-    nodes_from_schedule: Literal["all", "healthy"] = Field(
-        default="all",
-        description="'all': every episode scores `nodes`; 'healthy': only those of `nodes` the episode's fault "
-                    "schedule leaves without an IMU fault (needs an IMU fault)")
     @model_validator(mode="after")
     def _consistent(self) -> "TaskSpec":
         n = self.n_uav
@@ -437,6 +462,8 @@ class TaskSpec(Frozen):
                 raise ValueError(f"faults.nlos_steps index={s.index} out of range for {s.target} (count {limit})")
         if f.imu_cascade_random is not None and f.imu_cascade_random.n_faulty >= n:
             raise ValueError(f"faults.imu_cascade_random.n_faulty={f.imu_cascade_random.n_faulty} must be < n_uav={n}")
+        if self.scoring.nodes_from_schedule == "healthy":
+            self._check_healthy_scoring()
         if (f.gps_drifts or f.hybrid_noise) and not gps:
             raise ValueError("GPS faults need sensors.gps_sigma for every UAV")
         if self.sensors.velocity_bias_sigma > 0 and self.sensors.velocity_sigma is None:
@@ -450,33 +477,6 @@ class TaskSpec(Frozen):
         if not (self.anchors or self.landmarks or gps or self.sensors.peers.kind != "none"):
             raise ValueError("a task needs at least one measurement channel (anchors, landmarks, gps or peers)")
         return self
-
-    # ---- derived quantities
-    @property
-    def task_id(self) -> str:
-        """Registered ID, e.g. ``swarmloc/NLOS-v0``."""
-        return f"swarmloc/{self.name}-v{self.version}"
-
-    @property
-    def n_steps(self) -> int:
-        """Filter steps per episode (T)."""
-        return int(round(self.duration / self.dt))
-
-        if self.scoring.nodes_from_schedule == "healthy":
-            self._check_healthy_scoring()
-    @property
-    def n_peer_channels(self) -> int:
-        return 0 if self.sensors.peers.kind == "none" else self.n_uav - 1
-
-    @property
-    def n_channels(self) -> int:
-        """Channels per UAV (L): anchor ranges (or TDOA pairs) + peers + landmark slots + GPS."""
-        return self.n_anchor_channels + self.n_peer_channels + len(self.landmarks) + (1 if self.sensors.gps_sigma else 0)
-
-    @property
-    def n_anchor_channels(self) -> int:
-        """Anchor channels per UAV: one range per anchor, or one range difference per TDOA pair."""
-        return len(self.anchors) if self.sensors.tdoa is None else len(self.sensors.tdoa.pairs)
 
     def _check_healthy_scoring(self) -> None:
         """``scoring.nodes_from_schedule="healthy"`` must leave every episode at least one scored UAV."""
@@ -492,6 +492,31 @@ class TaskSpec(Frozen):
         if len(scored) <= drawn:
             raise ValueError(f"scoring.nodes_from_schedule='healthy' could score no UAV: {len(scored)} scored UAV(s) "
                              f"outside the scheduled IMU cascades, and {drawn} are drawn faulty per episode")
+
+    # ---- derived quantities
+    @property
+    def task_id(self) -> str:
+        """Registered ID, e.g. ``swarmloc/NLOS-v0``."""
+        return f"swarmloc/{self.name}-v{self.version}"
+
+    @property
+    def n_steps(self) -> int:
+        """Filter steps per episode (T)."""
+        return int(round(self.duration / self.dt))
+
+    @property
+    def n_peer_channels(self) -> int:
+        return 0 if self.sensors.peers.kind == "none" else self.n_uav - 1
+
+    @property
+    def n_channels(self) -> int:
+        """Channels per UAV (L): anchor ranges (or TDOA pairs) + peers + landmark slots + GPS."""
+        return self.n_anchor_channels + self.n_peer_channels + len(self.landmarks) + (1 if self.sensors.gps_sigma else 0)
+
+    @property
+    def n_anchor_channels(self) -> int:
+        """Anchor channels per UAV: one range per anchor, or one range difference per TDOA pair."""
+        return len(self.anchors) if self.sensors.tdoa is None else len(self.sensors.tdoa.pairs)
 
     @property
     def scored_nodes(self) -> tuple[int, ...]:

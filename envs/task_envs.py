@@ -12,6 +12,7 @@ from . import registration
 from .gym_env import SwarmLocEnv
 from .task_docs import task_doc
 from .tasks import CATALOGUE
+from .tasks_v1 import HISTORY_V1
 
 _V0 = ("v0: initial release (standard reward v0, processor profile stm32f427-cortex-m4f v0).",)
 #: the TDOA tasks start at v1 (they came with the TDOA channel kind, beside the frozen v0 tasks)
@@ -23,6 +24,9 @@ _HISTORY: dict[str, tuple[str, ...]] = {
                                      "anchors_vicon.csv) instead of the raw total-station coordinates, 5–11 cm "
                                      "off; everything else as v0.",),
     **{task_id: _TDOA_V1 for task_id in CATALOGUE if "Tdoa" in task_id or task_id == "swarmloc/TDOA-v1"},
+    # benchmark v1: a v1 task of a v0 family lists the v0 release first; a new task only its v1 line
+    **{task_id: (_V0 if task_id.replace("-v1", "-v0") in CATALOGUE else ()) + (line,)
+       for task_id, line in HISTORY_V1.items()},
 }
 
 

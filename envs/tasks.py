@@ -414,3 +414,10 @@ def _merge(base: dict, changes: dict) -> dict:
         else:
             out[key] = value
     return out
+
+
+# the v1 simulated tasks build on the v0 factories above (envs/tasks_v1.py); the package's
+# __init__ imports this module first, so tasks_v1 finds every factory defined
+from .tasks_v1 import CATALOGUE_V1  # noqa: E402
+
+CATALOGUE.update(CATALOGUE_V1)

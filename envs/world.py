@@ -13,6 +13,8 @@ Batch layout: ``(B, N, ...)``; channel buffers ``(B, N, L, ...)``; measurements 
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -127,6 +129,7 @@ class World:
             traj_prm=np.ascontiguousarray(trajectory_params(spec)).reshape(n, N_PARAMS),
             anchors=self.anchors, landmarks=self.landmarks, kind=lay.kind, target=lay.target, linked=lay.linked,
             sigma=lay.sigma, imu_sigma=float(s.imu_sigma), camera_range=float(s.camera_max_range),
+            camera_fov_cos=math.cos(math.radians(s.camera_fov_deg) / 2.0),
             peer_range=float(s.peers.max_range), has_velocity=s.velocity_sigma is not None,
             velocity_sigma=float(s.velocity_sigma or 0.0), label_threshold=self.label_threshold, seeds=self.seeds,
             steps=self.steps,

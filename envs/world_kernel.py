@@ -47,6 +47,8 @@ class WorldInputs(NamedTuple):
         sigma: ``(N, L)`` nominal noise σ per scalar row [m].
         imu_sigma: accelerometer noise σ [m/s²].
         camera_range, peer_range: landmark and peer visibility radius [m].
+        camera_fov_cos: cosine of half the camera's field of view; the camera looks along the
+            UAV's velocity (−1: omnidirectional, every landmark in range is seen).
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
         label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff
             (``labels.label_thresholds``).
@@ -80,6 +82,7 @@ class WorldInputs(NamedTuple):
     sigma: np.ndarray
     imu_sigma: float
     camera_range: float
+    camera_fov_cos: float
     peer_range: float
     has_velocity: bool
     velocity_sigma: float
@@ -145,6 +148,23 @@ def block_bounds(block: int, n: int) -> tuple[int, int]:
     return block * BLOCK, min((block + 1) * BLOCK, n)
 
 
+@njit(cache=True, inline="always")
+def _in_view(landmarks, pos, vel, b, i, j, fov_cos) -> bool:
+    """Landmark j lies inside UAV i's forward camera cone (the camera looks along the velocity).
+
+    A UAV at rest (speed below 1 mm/s) has no defined heading: it sees every landmark in range.
+    """
+    dot, rr, vv = 0.0, 0.0, 0.0
+    for d in range(3):
+        rel = landmarks[j, d] - pos[b, i, d]
+        dot += rel * vel[b, i, d]
+        rr += rel * rel
+        vv += vel[b, i, d] * vel[b, i, d]
+    if vv < 1e-6:
+        return True
+    return dot >= fov_cos * math.sqrt(rr * vv)
+
+
 # The kernel passes helpers only arrays and scalars: handing a named tuple of arrays to a
 # helper (inlined or not) costs an atomic reference count per field and call, which numba
 # cannot prune. Division by zero cannot occur (dt, τ > 0); error_model="numpy" keeps
@@ -169,7 +189,8 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     outage_time, outage_nodes, uwb_time, uwb_mask = fs.outage_time, fs.outage_nodes, fs.uwb_time, fs.uwb_mask
     drift_time, drift_rate, drift_nodes = fs.drift_time, fs.drift_rate, fs.drift_nodes
     gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
-    g = fs.gm_param  # [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
+    landmark_offset = fs.landmark_offset
+    gm_params = fs.gm_param  # (B, 6) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
     h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
     n, n_l = z.shape[1], z.shape[2]
     # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
@@ -212,6 +233,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
 
         # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
         # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
+        g = gm_params[b]
         p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
         if g[4] > 0.0:
             p_on = 1.0 - math.exp(-g[0] * w.dt)
@@ -262,7 +284,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             else:
                                 err += lo_b
                     # Gauss–Markov NLOS episodes
-                    if gm_mask[i, l]:
+                    if gm_mask[b, i, l]:
                         if gm_left[b, i, l] <= 0.0:
                             gm_bias[b, i, l] = 0.0
                             if uniform_at(key_onset, 2 * idx) < p_on:
@@ -289,11 +311,15 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                 elif ch == LANDMARK:
                     dist2 = 0.0
                     for d in range(3):
-                        systematic[b, i, l, d] = 0.0
-                        rel = landmarks[j, d] - pos[b, i, d]
+                        # the landmark sits at its mapped (public) position plus the map's error
+                        err_map = landmark_offset[b, j, d]
+                        systematic[b, i, l, d] = err_map
+                        rel = landmarks[j, d] + err_map - pos[b, i, d]
                         dist2 += rel * rel
                         z[b, i, l, d] = rel + sg * normal_at(key_landmark, idx * 3 + d)
                     if vision_out or dist2 > w.camera_range * w.camera_range:
+                        ok = False
+                    elif w.camera_fov_cos > -1.0 and not _in_view(landmarks, pos, vel, b, i, j, w.camera_fov_cos):
                         ok = False
                 elif ch == PEER_REL:
                     for d in range(3):

@@ -311,19 +311,25 @@ class Results(BaseModel):
         return [(e.task, e.seed) for e in self.episodes]
 
 
-def suite_sha256(episodes: Iterable[tuple[str, int]]) -> str:
-    """Canonical SHA-256 of a suite's (task, seed) list.
+def suite_sha256(episodes: Iterable[tuple[str, int]], specs: Iterable[str] = ()) -> str:
+    """Canonical SHA-256 of a suite's (task, seed) list, and of its task specs where given.
 
-    The list is sorted first, so the hash names the set of episodes, not their order.
+    The list is sorted first, so the hash names the set of episodes, not their order. The v1
+    suites also pass the canonical JSON of every task's spec, so changing a task changes the
+    hash; without specs (the v0 suites) the hash is that of the episode list alone.
 
     Args:
         episodes: (task ID, seed) pairs.
+        specs: the tasks' spec JSON (``TaskSpec.model_dump_json()``), any order.
 
     Returns:
-        Lower-case hex digest of the compact JSON ``[[task, seed], ...]``.
+        Lower-case hex digest of the compact JSON ``[[task, seed], ...]``, or of
+        ``{"episodes": [...], "specs": [sorted spec JSON]}`` when specs are given.
     """
-    canonical = sorted((str(task), int(seed)) for task, seed in episodes)
-    text = json.dumps([list(pair) for pair in canonical], separators=(",", ":"))
+    canonical = [list(pair) for pair in sorted((str(task), int(seed)) for task, seed in episodes)]
+    specs = sorted(specs)
+    payload = {"episodes": canonical, "specs": specs} if specs else canonical
+    text = json.dumps(payload, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
@@ -495,13 +501,13 @@ def load_results(path: str | os.PathLike[str], max_bytes: int | None = None) -> 
 __all__ = [
     "AGGREGATE_FIELDS",
     "METRIC_NAMES",
+    "SCHEMA_METRICS",
     "SCHEMA_VERSION",
     "Aggregate",
     "Episode",
     "EpisodeMetrics",
     "MachineInfo",
     "MethodInfo",
-    "SCHEMA_METRICS",
     "Provenance",
     "Results",
     "ResultsFileError",

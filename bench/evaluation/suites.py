@@ -48,6 +48,7 @@ from swarmloc.envs.seeds import (  # noqa: F401  (re-exported: the suites' seed 
     check_training_seeds,
 )
 from swarmloc.envs.tasks import CATALOGUE, canonical_task_id, get_spec
+from swarmloc.envs.tasks_v1 import CATALOGUE_V1
 
 
 #: the tasks of ``standard-v0`` (frozen with the suite)
@@ -87,10 +88,11 @@ class Suite:
     version: str
     episodes: tuple[tuple[str, int], ...]
     description: str = ""
+    specs: tuple[str, ...] = ()
     sha256: str = field(init=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "sha256", suite_sha256(self.episodes))
+        object.__setattr__(self, "sha256", suite_sha256(self.episodes, self.specs))
 
     @property
     def tasks(self) -> list[str]:
@@ -116,14 +118,52 @@ def simulated_tasks() -> list[str]:
     return [t for t in CATALOGUE if get_spec(t).trajectory.kind != "recorded"]
 
 
+#: the tasks of ``quick`` and ``dev`` (frozen with them: the simulated tasks of the catalogue
+#: before benchmark v1's tasks, which are in ``quick-v1`` and ``dev-v1``)
+QUICK_V0_TASKS: tuple[str, ...] = STANDARD_V0_TASKS + ("swarmloc/AnchorFree-v0", "swarmloc/TDOA-v1")
+
+
 def _quick() -> Suite:
-    return Suite("quick", "0", _episodes(simulated_tasks(), TEST_SEED_START, 4),
-                 "every task × the first 4 test seeds (demo, smoke tests)")
+    return Suite("quick", "0", _episodes(QUICK_V0_TASKS, TEST_SEED_START, 4),
+                 "the v0 simulated tasks (and TDOA-v1) × the first 4 test seeds (smoke tests)")
 
 
 def _dev() -> Suite:
-    return Suite("dev", "0", _episodes(simulated_tasks(), DEV_SEED_START, 8),
-                 "every task × 8 dev seeds (2_000_000 … 2_000_007), for tuning")
+    return Suite("dev", "0", _episodes(QUICK_V0_TASKS, DEV_SEED_START, 8),
+                 "the v0 simulated tasks (and TDOA-v1) × 8 dev seeds (2_000_000 … 2_000_007), for tuning")
+
+
+#: the tasks of ``standard-v1``: every simulated v1 task, in-distribution and shifted splits
+#: (``envs/tasks_v1.py``), plus the simulated TDOA room
+STANDARD_V1_TASKS: tuple[str, ...] = ("swarmloc/TDOA-v1",) + tuple(CATALOGUE_V1)
+
+
+def split_of(task: str) -> str:
+    """``"shifted"`` for a shifted-split task (``*RandomShifted-v1``), else ``"in-distribution"``."""
+    return "shifted" if "RandomShifted-" in task else "in-distribution"
+
+
+def _standard_v1() -> Suite:
+    tasks = STANDARD_V1_TASKS
+    return Suite("standard-v1", "1", _episodes(tasks, TEST_SEED_START, 32),
+                 f"leaderboard suite v1: {len(tasks)} tasks (in-distribution and shifted splits) × 32 test seeds "
+                 "(1_000_000 … 1_000_031); the hash covers the task specs", specs=_specs(tasks))
+
+
+def _quick_v1() -> Suite:
+    return Suite("quick-v1", "1", _episodes(STANDARD_V1_TASKS, TEST_SEED_START, 4),
+                 "standard-v1's tasks × the first 4 test seeds (demo, smoke tests)", specs=_specs(STANDARD_V1_TASKS))
+
+
+def _dev_v1() -> Suite:
+    return Suite("dev-v1", "1", _episodes(STANDARD_V1_TASKS, DEV_SEED_START, 8),
+                 "standard-v1's tasks × 8 dev seeds (2_000_000 … 2_000_007), for tuning",
+                 specs=_specs(STANDARD_V1_TASKS))
+
+
+def _specs(tasks: Iterable[str]) -> tuple[str, ...]:
+    """The canonical JSON of each task's spec, the part of a v1 suite's hash that names the tasks."""
+    return tuple(get_spec(t).model_dump_json() for t in tasks)
 
 
 #: the tasks of ``real-v0`` (frozen with the suite)
@@ -156,7 +196,8 @@ def _real_v1() -> Suite:
                  "needs SWARMLOC_DATA")
 
 
-SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0, "real-v1": _real_v1}
+SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0,
+          "standard-v1": _standard_v1, "quick-v1": _quick_v1, "dev-v1": _dev_v1, "real-v1": _real_v1}
 
 
 def missing_data(suite: Suite) -> dict[str, str]:
