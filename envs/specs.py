@@ -186,6 +186,11 @@ class Sensors(Frozen):
     peers: PeerLinks = PeerLinks()
     camera_sigma: PositiveFloat = 0.15
     camera_max_range: PositiveFloat = 10.0
+    camera_fov_deg: Annotated[float, Field(gt=0.0, le=360.0)] = Field(
+        default=360.0, description="camera field of view [deg], centred on the UAV's velocity; 360 = omnidirectional")
+    landmark_map_sigma: NonNegFloat = Field(
+        default=0.0, description="error std per axis of the landmark map (the public landmark positions), drawn per "
+                                 "episode [m]; 0 = the map is exact")
     gps_sigma: tuple[PositiveFloat, ...] = Field(default=(), description="per-UAV GPS std [m]; empty = no GPS")
     velocity_sigma: PositiveFloat | None = Field(
         default=None, description="visual odometry: world-frame velocity std per axis [m/s]; None = no VO")
@@ -222,6 +227,12 @@ class NlosGaussMarkov(Frozen):
     exponential time of mean ``mean_duration``; during it the bias follows a first-order
     Gauss–Markov process around ``mean_bias`` with time constant ``tau`` and stationary
     std ``bias_sigma``, clipped to [0, max_bias].
+
+    Randomized scenarios (the ``*Random`` tasks) draw per episode, from the episode seed:
+    the onset rate uniformly in ``onset_rate_range``, the mean bias log-uniformly in
+    ``mean_bias_range`` (NLOS excess delays span an order of magnitude), and which of the
+    eligible links are NLOS-prone at all (each with probability ``link_fraction``). A
+    range left ``None`` keeps the fixed value.
     """
 
     targets: tuple[Literal["anchor", "peer"], ...] = ("anchor", "peer")
@@ -232,6 +243,20 @@ class NlosGaussMarkov(Frozen):
     bias_sigma: NonNegFloat = 1.0
     tau: PositiveFloat = 2.0
     max_bias: PositiveFloat = 5.0
+    onset_rate_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
+        default=None, description="per-episode onset rate, uniform in [low, high] [1/s]; None = onset_rate")
+    mean_bias_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
+        default=None, description="per-episode mean bias, log-uniform in [low, high] [m]; None = mean_bias")
+    link_fraction: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
+        default=1.0, description="probability that an eligible link is NLOS-prone in an episode (drawn per episode)")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "NlosGaussMarkov":
+        for name in ("onset_rate_range", "mean_bias_range"):
+            r = getattr(self, name)
+            if r is not None and r[1] < r[0]:
+                raise ValueError(f"{name}={r}: low must be <= high")
+        return self
 
 
 class NlosUniform(Frozen):
