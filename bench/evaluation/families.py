@@ -48,7 +48,7 @@ FAMILY_ORDER: tuple[str, ...] = (
 )
 
 _VERSION = re.compile(r"-v\d+$")
-_VARIANT = re.compile(r"(?:Random)?\d*(?:Random)?$")
+_VARIANT = re.compile(r"(?:Random(?:Shifted)?)?\d*(?:Random(?:Shifted)?)?$")
 
 
 def short_task(task: str) -> str:
@@ -62,13 +62,27 @@ def task_label(task: str) -> str:
 
 
 def task_base(task: str) -> str:
-    """The task's base name: its label without a ``Random`` variant suffix and trailing digits.
+    """The task's base name: its label without a ``Random`` / ``RandomShifted`` variant suffix and trailing digits.
 
-    >>> task_base("swarmloc/CascadedFaultRandom-v0"), task_base("HybridNoise30-v1")
-    ('CascadedFault', 'HybridNoise')
+    >>> task_base("swarmloc/CascadedFaultRandom-v0"), task_base("HybridNoise30-v1"), task_base("NLOSRandomShifted-v1")
+    ('CascadedFault', 'HybridNoise', 'NLOS')
     """
     label = task_label(task)
     return _VARIANT.sub("", label) or label
+
+
+def task_split(task: str) -> str:
+    """The scenario split of a task: ``"fixed"``, ``"random"`` (``…Random``: scenario parameters
+    drawn per episode, the in-distribution split learned methods train on) or ``"shifted"``
+    (``…RandomShifted``: drawn outside the training ranges, the out-of-distribution split).
+
+    >>> task_split("swarmloc/NLOS-v1"), task_split("NLOSRandom-v1"), task_split("ScaleRandomShifted-v1")
+    ('fixed', 'random', 'shifted')
+    """
+    label = task_label(task)
+    if label.endswith("RandomShifted"):
+        return "shifted"
+    return "random" if "Random" in label[len(task_base(task)):] else "fixed"
 
 
 def task_family(task: str) -> str:
@@ -98,4 +112,4 @@ def group_by_family(tasks: Iterable[str]) -> dict[str, list[str]]:
     return {family: groups[family] for family in order}
 
 
-__all__ = ["FAMILY_OF_BASE", "FAMILY_ORDER", "group_by_family", "short_task", "task_base", "task_family", "task_label"]
+__all__ = ["FAMILY_OF_BASE", "FAMILY_ORDER", "group_by_family", "short_task", "task_base", "task_family", "task_label", "task_split"]

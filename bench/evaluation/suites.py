@@ -138,11 +138,6 @@ def _dev() -> Suite:
 STANDARD_V1_TASKS: tuple[str, ...] = ("swarmloc/TDOA-v1",) + tuple(CATALOGUE_V1)
 
 
-def split_of(task: str) -> str:
-    """``"shifted"`` for a shifted-split task (``*RandomShifted-v1``), else ``"in-distribution"``."""
-    return "shifted" if "RandomShifted-" in task else "in-distribution"
-
-
 def _standard_v1() -> Suite:
     tasks = STANDARD_V1_TASKS
     return Suite("standard-v1", "1", _episodes(tasks, TEST_SEED_START, 32),

@@ -37,7 +37,7 @@ from swarmloc.agents.registry import REGISTRY
 from swarmloc.bench.common.files import write_text_atomic
 from swarmloc.bench.common.provenance import collect_provenance
 from swarmloc.bench.evaluation import metrics as M
-from swarmloc.bench.evaluation.families import FAMILY_OF_BASE, group_by_family, task_base, task_label
+from swarmloc.bench.evaluation.families import FAMILY_OF_BASE, group_by_family, task_base, task_label, task_split
 from swarmloc.bench.evaluation.outcomes import TaskOutcome
 from swarmloc.bench.evaluation.score import suite_score
 from swarmloc.bench.evaluation.suites import Suite
@@ -57,17 +57,9 @@ SPLITS = ("fixed", "random", "shifted")
 
 
 def task_variant(task: str) -> tuple[str, str]:
-    """``(base, split)`` of a task ID: ``CascadedFaultRandomShifted-v1`` → ``("CascadedFault", "shifted")``.
-
-    split is ``fixed`` (a fixed scenario), ``random`` (``…Random``: parameters drawn per episode,
-    in-distribution) or ``shifted`` (``…RandomShifted``: drawn outside the training ranges).
-    """
-    label = task_label(task)
-    core = label.removesuffix("Shifted")
-    base = task_base(core)
-    if core != label:
-        return base, "shifted"
-    return base, "random" if "Random" in core[len(base):] else "fixed"
+    """``(base, split)`` of a task ID: ``CascadedFaultRandomShifted-v1`` → ``("CascadedFault", "shifted")``
+    (``families.task_base`` and ``families.task_split``)."""
+    return task_base(task), task_split(task)
 
 
 def is_fault_task(spec: TaskSpec) -> bool:
