@@ -179,16 +179,20 @@ def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry]) ->
                       tuple(s for s in standings if s.entry.privileged), reference)
 
 
+#: the current benchmark's suite: its board comes first, the shipped results and the demo default to it
+DEFAULT_SUITE = "standard-v1"
+
+
 def by_suite(entries: Iterable[LeaderboardEntry]) -> dict[SuiteKey, list[LeaderboardEntry]]:
-    """Group entries by (suite name, suite version), suites sorted by name then version."""
+    """Group entries by (suite name, suite version): ``DEFAULT_SUITE`` first, then by name and version."""
     groups: dict[SuiteKey, list[LeaderboardEntry]] = {}
     for entry in entries:
         groups.setdefault((entry.suite_name, entry.suite_version), []).append(entry)
-    return dict(sorted(groups.items()))
+    return dict(sorted(groups.items(), key=lambda item: (item[0][0] != DEFAULT_SUITE, item[0])))
 
 
 def suite_boards(entries: Iterable[LeaderboardEntry]) -> list[SuiteBoard]:
-    """One board per suite, suites sorted by name then version."""
+    """One board per suite, in ``by_suite`` order."""
     return [suite_board(name, version, group) for (name, version), group in by_suite(entries).items()]
 
 

@@ -1,11 +1,13 @@
-"""The shipped reference methods' standard-v0 results, loaded into a store.
+"""The shipped reference methods' results, loaded into a store.
 
-``leaderboard/results/<method>.json`` are the results files of the shipped methods on
-``standard-v0`` (written by ``swarmloc evaluate --suite standard-v0``, one per method;
-regenerate them with ``python -m swarmloc.leaderboard.shipped --regenerate``). They go
-into the store through the normal submit path with ``trust=True`` (no re-run: they are
-the reference methods) and every other check, so a fresh clone shows a populated
-leaderboard. Entries already in the store are left as they are.
+``leaderboard/results/standard-v1/<method>.json`` are the results files of the shipped
+methods on ``standard-v1``, the default board (written by ``swarmloc evaluate --suite
+standard-v1``, one per method; regenerate them with ``python -m swarmloc.leaderboard.shipped
+--regenerate [METHOD ...]``); ``leaderboard/results/<method>.json`` are those of the frozen
+``standard-v0`` (``--suite standard-v0``). They go into the store through the normal submit
+path with ``trust=True`` (no re-run: they are the reference methods) and every other check,
+so a fresh clone shows a populated leaderboard. Entries already in the store are left as
+they are.
 """
 
 from __future__ import annotations
@@ -15,10 +17,14 @@ from pathlib import Path
 
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.leaderboard.errors import DuplicateSubmission
+from swarmloc.leaderboard.ranking import DEFAULT_SUITE
 from swarmloc.leaderboard.store import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 from swarmloc.leaderboard.submit import submit
 
+#: the shipped standard-v0 results (frozen with the suite)
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
+#: the shipped results of each suite
+RESULTS_DIRS: dict[str, Path] = {DEFAULT_SUITE: RESULTS_DIR / DEFAULT_SUITE, "standard-v0": RESULTS_DIR}
 
 
 @dataclass(frozen=True)
@@ -30,17 +36,19 @@ class ShippedLoad:
     refused: tuple[tuple[str, str], ...]
 
 
-def shipped_results(results_dir: Path = RESULTS_DIR) -> list[Path]:
-    """The shipped results files, in name order."""
-    return sorted(results_dir.glob("*.json"))
+def shipped_results(results_dir: Path | None = None) -> list[Path]:
+    """The shipped results files of one folder in name order (default: every suite's, ``RESULTS_DIRS`` order)."""
+    if results_dir is not None:
+        return sorted(results_dir.glob("*.json"))
+    return [path for folder in RESULTS_DIRS.values() for path in sorted(folder.glob("*.json"))]
 
 
-def load_shipped(store: LeaderboardStore, results_dir: Path = RESULTS_DIR) -> ShippedLoad:
+def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> ShippedLoad:
     """Store every shipped results file not yet in ``store``.
 
     Args:
         store: an open leaderboard store.
-        results_dir: where the shipped results files are.
+        results_dir: where the shipped results files are (default: every suite's folder).
 
     Returns:
         A ``ShippedLoad`` summary. A file that fails validation is reported, not raised:
@@ -91,7 +99,7 @@ def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path
     with LeaderboardStore(db_url) as store:
         loaded = load_shipped(store)
         if loaded.stored:
-            console.print(f"stored the shipped standard-v0 results of {len(loaded.stored)} method(s)")
+            console.print(f"stored {len(loaded.stored)} shipped results file(s) ({', '.join(RESULTS_DIRS)})")
         for name, why in loaded.refused:
             console.print(f"[yellow]not stored {name}:[/yellow] {why}")
         print_leaderboard(store, console=console)
@@ -101,8 +109,8 @@ def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path
     return index
 
 
-def regenerate(methods: list[str], results_dir: Path = RESULTS_DIR, workers: int = 2) -> None:
-    """Re-evaluate ``methods`` on standard-v0 into ``results_dir`` (traces are not kept).
+def regenerate(methods: list[str], suite_name: str = DEFAULT_SUITE, workers: int = 2) -> None:
+    """Re-evaluate ``methods`` on a suite into its shipped results folder (traces are not kept).
 
     All methods run in one evaluation, so the references every episode needs (uniform, the
     oracles, the information bound) are computed once per worker, not once per method.
@@ -111,8 +119,9 @@ def regenerate(methods: list[str], results_dir: Path = RESULTS_DIR, workers: int
     from swarmloc.bench.evaluation.runner import evaluate_methods
     from swarmloc.bench.evaluation.suites import get_suite
 
+    results_dir = RESULTS_DIRS[suite_name]
     results_dir.mkdir(parents=True, exist_ok=True)
-    suite = get_suite("standard-v0")
+    suite = get_suite(suite_name)
     runs = evaluate_methods(methods, suite, workers=workers, trace=False)
     failed = {name: run.failed for name, run in runs.items() if run.failed}
     if failed:
@@ -126,12 +135,13 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--regenerate", nargs="*", metavar="METHOD",
-                        help="re-evaluate these shipped methods (all when none is named)")
+                        help="re-evaluate these shipped methods (all of the suite's when none is named)")
+    parser.add_argument("--suite", default=DEFAULT_SUITE, choices=list(RESULTS_DIRS))
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     if args.regenerate is not None:
-        methods = args.regenerate or sorted(path.stem for path in shipped_results())
-        regenerate(methods, workers=args.workers)
+        methods = args.regenerate or sorted(path.stem for path in shipped_results(RESULTS_DIRS[args.suite]))
+        regenerate(methods, args.suite, workers=args.workers)
 
 
 if __name__ == "__main__":

@@ -75,3 +75,34 @@ def test_suite_satisfies_leaderboard_lookup():
     suite = default_suite_lookup("standard-v0")
     assert (suite.name, suite.version, suite.sha256) == ("standard-v0", "0", STANDARD_V0_SHA256)
     assert len(suite.episodes) == 17 * 32
+
+
+def test_standard_v1_holds_every_simulated_v1_task_and_its_hash_covers_the_specs():
+    from swarmloc.bench.evaluation.families import task_split
+    from swarmloc.bench.evaluation.suites import STANDARD_V1_TASKS, Suite, simulated_tasks
+    from swarmloc.envs.tasks import get_spec
+
+    suite = get_suite("standard-v1")
+    assert (suite.name, suite.version) == ("standard-v1", "1")
+    assert suite.tasks == list(STANDARD_V1_TASKS)
+    assert set(suite.tasks) == {t for t in simulated_tasks() if t.endswith("-v1")}
+    for task in suite.tasks:
+        assert suite.seeds(task) == list(range(1_000_000, 1_000_032))
+    specs = tuple(get_spec(t).model_dump_json() for t in suite.tasks)
+    assert suite.sha256 == suite_sha256(suite.episodes, specs) != suite_sha256(suite.episodes)
+    # one task changed (its NLOS onset rate), same episodes: another hash
+    changed = (get_spec(suite.tasks[2], faults={"nlos_gauss_markov": {"onset_rate": 0.09}}).model_dump_json(),)
+    assert Suite("x", "1", suite.episodes, specs=specs[:2] + changed + specs[3:]).sha256 != suite.sha256
+    # every shifted split has its in-distribution split beside it
+    for task in suite.tasks:
+        if task_split(task) == "shifted":
+            assert task.replace("RandomShifted-", "Random-") in suite.tasks
+
+
+def test_quick_v1_and_dev_v1():
+    standard, quick, dev = get_suite("standard-v1"), get_suite("quick-v1"), get_suite("dev-v1")
+    assert quick.tasks == dev.tasks == standard.tasks
+    assert set(quick.episodes) <= set(standard.episodes) and len(quick.episodes) == 4 * len(standard.tasks)
+    assert all(2_000_000 <= s < 2_000_008 for _, s in dev.episodes)
+    sub = restrict_tasks(standard, "NLOS-v1")
+    assert sub.specs and sub.sha256 != restrict_tasks(get_suite("dev-v1"), "NLOS-v1").sha256

@@ -273,4 +273,5 @@ def restrict_tasks(suite: Suite, tasks: Sequence[str] | str) -> Suite:
     keep = set(wanted)
     episodes = tuple((t, s) for t, s in suite.episodes if t in keep)
     return Suite(f"{suite.name}-subset", suite.version, episodes,
-                 f"{suite.name} restricted to {len(keep)} task(s)")
+                 f"{suite.name} restricted to {len(keep)} task(s)",
+                 specs=_specs([t for t in suite.tasks if t in keep]) if suite.specs else ())
