@@ -16,7 +16,7 @@ import numpy as np
 
 from .channels import ANCHOR, PEER, PEER_REL, TDOA, ChannelLayout
 from .rng import Stream, normal, uniform
-from .specs import TaskSpec
+from .specs import GpsDriftRandom, TaskSpec, VisionOutageRandom
 
 BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
 #: ``hybrid_param[5]``: the hybrid GPS noise model (``specs.HybridNoise.model``)
@@ -24,9 +24,11 @@ HYBRID_WEIGHTED_SUM, HYBRID_MIXTURE = 0, 1
 
 
 #: schedule fields that describe the task, not an episode (no leading batch axis)
-PER_TASK_FIELDS = ("hybrid_nodes", "hybrid_param", "packet_loss")
+PER_TASK_FIELDS = ("hybrid_nodes", "packet_loss")
 #: index offset of the per-episode Gauss–Markov draws in the schedule stream (clear of the others)
 GM_DRAWS = 3_000_000
+#: index offsets of the per-episode hybrid-noise ratio, GPS drift and camera outage draws
+HYBRID_DRAWS, DRIFT_DRAWS, OUTAGE_DRAWS = 5_000_000, 6_000_000, 7_000_000
 
 
 class FaultSchedule(NamedTuple):
@@ -42,7 +44,8 @@ class FaultSchedule(NamedTuple):
         imu_bias: ``(B, Wi, 3)`` accelerometer bias added inside the window [m/s²].
         imu_nodes: ``(B, Wi, N)`` faulty UAVs per window.
         imu_drop: ``(B, Wi)`` whether the faulty UAVs go blind (no measurement at all).
-        outage_time: ``(B, Wo, 2)`` camera outage windows; ``outage_nodes`` ``(B, Wo, N)``.
+        outage_time: ``(B, Wo, 2)`` camera outage windows; ``outage_nodes`` ``(B, Wo, N)``
+            (randomized outages pad to their most windows with empty ones, [0, 0) on no UAV).
         uwb_time: ``(B, Wu, 2)`` UWB outage windows; ``uwb_mask`` ``(B, Wu, N, L)`` the
             range / peer channels each window silences.
         drift_time: ``(B, Wg, 2)`` GPS drift windows; ``drift_rate`` ``(B, Wg, 3)`` [m/s];
@@ -50,9 +53,10 @@ class FaultSchedule(NamedTuple):
         gm_mask: ``(B, N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(B, 6)``
             [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias] (per episode:
             a randomized scenario draws them from the seed).
-        hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(6,)``
+        hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(B, 6)``
             [ratio, t_scale, gauss_sigma, dof_low, dof_high, model] (model
-            ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``).
+            ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``; per episode: a randomized
+            scenario draws the ratio from the seed).
         packet_loss: probability a valid measurement is lost.
         landmark_offset: ``(B, M, 3)`` error of the landmark map: landmark m truly sits at its
             public position + ``landmark_offset[b, m]`` [m] (``Sensors.landmark_map_sigma``).
@@ -189,6 +193,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         for t0, t1 in f.vision_outage.windows:
             outage_rows.append((np.tile([t0, t1], (n_b, 1)),
                                 np.broadcast_to(_node_mask(f.vision_outage.nodes, n), (n_b, n)).copy()))
+    if f.vision_outage_random is not None:
+        outage_rows += _random_outages(f.vision_outage_random, n, seeds)
 
     uwb_rows = []
     if f.uwb_outage is not None:
@@ -204,6 +210,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         direction /= max(np.linalg.norm(direction), 1e-12)
         drift_rows.append((np.tile([d.start, d.end], (n_b, 1)), np.tile(d.rate * direction, (n_b, 1)),
                            np.broadcast_to(_node_mask(d.nodes, n), (n_b, n)).copy()))
+    if f.gps_drift_random is not None:
+        drift_rows.append(_random_drift(f.gps_drift_random, n, seeds))
 
     gm_mask = np.zeros((n_b, n, n_l), dtype=np.bool_)
     gm_param = np.zeros((n_b, 6))
@@ -226,12 +234,16 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
                 gm_mask[b] = eligible & prone
 
     hybrid_nodes = np.zeros(n, dtype=np.bool_)
-    hybrid_param = np.zeros(6)
+    hybrid_param = np.zeros((n_b, 6))
     if f.hybrid_noise is not None:
         h = f.hybrid_noise
         hybrid_nodes = _node_mask(h.nodes, n)
         model = HYBRID_MIXTURE if h.model == "mixture" else HYBRID_WEIGHTED_SUM
-        hybrid_param = np.array([h.ratio, h.t_scale, h.gauss_sigma, h.dof_low, max(h.dof_high, h.dof_low), model])
+        hybrid_param[:] = [h.ratio, h.t_scale, h.gauss_sigma, h.dof_low, max(h.dof_high, h.dof_low), model]
+        if h.ratio_range is not None:
+            lo, hi = h.ratio_range
+            for b, seed in enumerate(seeds):
+                hybrid_param[b, 0] = lo + (hi - lo) * uniform(int(seed), 0, Stream.SCHEDULE, HYBRID_DRAWS)
 
     def stack(rows: list, k: int, shape_tail: tuple, dtype=np.float64) -> np.ndarray:
         if not rows:
@@ -260,6 +272,59 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         packet_loss=float(f.packet_loss),
         landmark_offset=_landmark_offsets(spec, seeds),
     )
+
+
+def _uniform_in(r: tuple[float, float], u: float) -> float:
+    """The point u ∈ [0, 1) of the way through the range [low, high]."""
+    return r[0] + (r[1] - r[0]) * u
+
+
+def _count_in(r: tuple[int, int], u: float) -> int:
+    """An integer uniform in [low, high] from u ∈ [0, 1)."""
+    return r[0] + min(int(u * (r[1] - r[0] + 1)), r[1] - r[0])
+
+
+def _random_drift(r: GpsDriftRandom, n: int, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drift row of B episodes: window ``(B, 2)``, rate vector ``(B, 3)`` [m/s], drifting UAVs ``(B, N)``.
+
+    Draws (``DRIFT_DRAWS`` + k of the schedule stream, step 0): k = 0 onset, 1 duration, 2 speed,
+    3 azimuth, 4 how many UAVs drift, 10 + c the order in which candidate c is picked.
+    """
+    times, rates, nodes = np.zeros((len(seeds), 2)), np.zeros((len(seeds), 3)), np.zeros((len(seeds), n), np.bool_)
+    el = np.radians(r.elevation_deg)
+    for b, seed in enumerate(seeds):
+        draw = lambda k: uniform(int(seed), 0, Stream.SCHEDULE, DRIFT_DRAWS + k)  # noqa: E731
+        start = _uniform_in(r.start_range, draw(0))
+        times[b] = (start, start + _uniform_in(r.duration_range, draw(1)))
+        az = 2.0 * np.pi * draw(3)
+        rates[b] = _uniform_in(r.rate_range, draw(2)) * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
+                                                                   np.sin(el)])
+        order = np.argsort([draw(10 + c) for c in range(len(r.nodes))], kind="stable")
+        picked = [r.nodes[c] for c in order[: _count_in(r.n_drifting_range, draw(4))]]
+        nodes[b, picked] = True
+    return times, rates, nodes
+
+
+def _random_outages(r: VisionOutageRandom, n: int, seeds: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``r.max_windows`` outage rows of B episodes: window ``(B, 2)``, blind UAVs ``(B, N)`` each.
+
+    Episode b draws c outages (``OUTAGE_DRAWS`` + 0 of the schedule stream, step 0); outage k < c
+    lies in slot k of c equal slots of the span, duration at ``OUTAGE_DRAWS`` + 1 + 2k, start
+    within the slot at + 2 + 2k. Rows k ≥ c stay empty: [0, 0) on no UAV.
+    """
+    rows = [(np.zeros((len(seeds), 2)), np.zeros((len(seeds), n), np.bool_)) for _ in range(r.max_windows)]
+    mask = _node_mask(r.nodes, n)
+    t0, t1 = r.span
+    for b, seed in enumerate(seeds):
+        draw = lambda k: uniform(int(seed), 0, Stream.SCHEDULE, OUTAGE_DRAWS + k)  # noqa: E731
+        c = _count_in(r.count_range, draw(0))
+        slot = (t1 - t0) / max(c, 1)
+        for k in range(c):
+            length = _uniform_in(r.duration_range, draw(1 + 2 * k))
+            start = t0 + k * slot + (slot - length) * draw(2 + 2 * k)
+            rows[k][0][b] = (start, start + length)
+            rows[k][1][b] = mask
+    return rows
 
 
 #: index offset of the landmark-map draws in the schedule stream (clear of the others)

@@ -308,6 +308,44 @@ class VisionOutage(Frozen):
     nodes: tuple[int, ...] = ()
 
 
+class VisionOutageRandom(Frozen):
+    """Randomized camera blackouts: how many, when and how long drawn per episode from the seed.
+
+    Each episode has c outages, c uniform in the integers of ``count_range``. ``span`` is cut
+    into c equal slots and outage k lies in slot k: its duration uniform in
+    ``duration_range``, its start uniform over the positions where it fits in the slot. So
+    the outages never overlap and spread over the span. No landmark channel of ``nodes`` is
+    valid inside an outage, as in ``VisionOutage``.
+    """
+
+    count_range: tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]] = Field(
+        default=(1, 2), description="outages per episode, uniform in the integers of [low, high]")
+    duration_range: tuple[PositiveFloat, PositiveFloat] = Field(
+        default=(5.0, 10.0), description="outage duration, uniform in [low, high] [s]")
+    span: tuple[NonNegFloat, PositiveFloat] = Field(
+        default=(10.0, 90.0), description="the outages lie in [start, end) of the episode [s]")
+    nodes: tuple[int, ...] = Field(default=(), description="UAVs whose camera fails; empty = all")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "VisionOutageRandom":
+        for name in ("count_range", "duration_range"):
+            r = getattr(self, name)
+            if r[1] < r[0]:
+                raise ValueError(f"{name}={r}: low must be <= high")
+        t0, t1 = self.span
+        if t1 <= t0:
+            raise ValueError(f"span={self.span}: end must be > start")
+        if self.count_range[1] * self.duration_range[1] > t1 - t0:
+            raise ValueError(f"{self.count_range[1]} outages of up to {self.duration_range[1]:g} s do not fit in "
+                             f"span={self.span} ({t1 - t0:g} s): lower count_range or duration_range, or widen span")
+        return self
+
+    @property
+    def max_windows(self) -> int:
+        """Outage windows per episode in the fault schedule: the most an episode can draw."""
+        return self.count_range[1]
+
+
 class GpsDrift(Frozen):
     """Gradual GPS fault: the fix drifts at ``rate`` [m/s] along ``direction`` (federated §5)."""
 
@@ -316,6 +354,44 @@ class GpsDrift(Frozen):
     end: PositiveFloat
     rate: PositiveFloat = 0.1
     direction: Vec3 = (1.0, 0.0, 0.0)
+
+
+class GpsDriftRandom(Frozen):
+    """Randomized gradual GPS fault: one drift per episode, drawn from the episode seed.
+
+    Per episode: k of the candidate ``nodes`` drift (k uniform in the integers of
+    ``n_drifting_range``, which ones uniformly), all by the same offset: from a start uniform
+    in ``start_range`` for a duration uniform in ``duration_range`` the fix moves at a speed
+    uniform in ``rate_range`` [m/s, total] along a direction at ``elevation_deg`` above the
+    horizontal with an azimuth uniform in [0°, 360°); after the window the offset stays (as
+    ``GpsDrift``). One offset for every drifting receiver: a slow ramp of a satellite's
+    signal or a spoofer dragging the fixes off reaches every receiver that tracks it alike.
+    """
+
+    nodes: tuple[int, ...] = Field(min_length=1, description="UAVs that may drift")
+    n_drifting_range: tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]] = Field(
+        default=(1, 1), description="drifting UAVs per episode, uniform in the integers of [low, high]")
+    start_range: tuple[NonNegFloat, NonNegFloat] = Field(
+        default=(50.0, 150.0), description="drift onset, uniform in [low, high] [s]")
+    duration_range: tuple[PositiveFloat, PositiveFloat] = Field(
+        default=(50.0, 100.0), description="drift duration, uniform in [low, high] [s]")
+    rate_range: tuple[PositiveFloat, PositiveFloat] = Field(
+        default=(0.05, 0.25), description="drift speed (norm of the 3-D rate), uniform in [low, high] [m/s]")
+    elevation_deg: Annotated[float, Field(ge=-90.0, le=90.0)] = Field(
+        default=0.0, description="angle of the drift direction above the horizontal [deg]")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "GpsDriftRandom":
+        if len(set(self.nodes)) != len(self.nodes):
+            raise ValueError(f"nodes={self.nodes} lists a UAV twice")
+        for name in ("n_drifting_range", "start_range", "duration_range", "rate_range"):
+            r = getattr(self, name)
+            if r[1] < r[0]:
+                raise ValueError(f"{name}={r}: low must be <= high")
+        if self.n_drifting_range[1] > len(self.nodes):
+            raise ValueError(f"n_drifting_range={self.n_drifting_range}: at most len(nodes)={len(self.nodes)} "
+                             "UAVs can drift")
+        return self
 
 
 class HybridNoise(Frozen):
@@ -331,6 +407,9 @@ class HybridNoise(Frozen):
 
     ``gauss_sigma`` should equal the fix's nominal ``Sensors.gps_sigma``: the filters and the
     information bound take that σ as the fix's noise.
+
+    Randomized scenarios (``HybridNoiseRandom``) draw the ratio per episode, from the episode
+    seed, uniformly in ``ratio_range``; left ``None`` the fixed ``ratio`` holds.
     """
 
     ratio: Probability
@@ -344,6 +423,14 @@ class HybridNoise(Frozen):
         default="weighted_sum",
         description="'weighted_sum': v = a·t + (1 − a)·g per axis (imm-arkf eq. 1 as printed, v0); 'mixture': "
                     "each fix Student-t with probability `ratio`, else Gaussian (v1)")
+    ratio_range: tuple[Probability, Probability] | None = Field(
+        default=None, description="per-episode ratio, uniform in [low, high] (drawn per episode); None = ratio")
+
+    @model_validator(mode="after")
+    def _ratio_range(self) -> "HybridNoise":
+        if self.ratio_range is not None and self.ratio_range[1] < self.ratio_range[0]:
+            raise ValueError(f"ratio_range={self.ratio_range}: low must be <= high")
+        return self
 
 
 class UwbOutage(Frozen):
@@ -374,6 +461,8 @@ class Faults(Frozen):
     uwb_outage: UwbOutage | None = None
     gps_drifts: tuple[GpsDrift, ...] = ()
     hybrid_noise: HybridNoise | None = None
+    vision_outage_random: VisionOutageRandom | None = None
+    gps_drift_random: GpsDriftRandom | None = None
 
 
 # --------------------------------------------------------------------------- filter / scoring
@@ -441,6 +530,10 @@ class TaskSpec(Frozen):
         node_lists += [("faults.imu_cascades.nodes", c.nodes) for c in f.imu_cascades]
         node_lists += [("faults.nlos_steps.nodes", s.nodes) for s in f.nlos_steps]
         node_lists += [("faults.gps_drifts.nodes", d.nodes) for d in f.gps_drifts]
+        if f.gps_drift_random is not None:
+            node_lists.append(("faults.gps_drift_random.nodes", f.gps_drift_random.nodes))
+        if f.vision_outage_random is not None:
+            node_lists.append(("faults.vision_outage_random.nodes", f.vision_outage_random.nodes))
         if f.uwb_outage is not None:
             node_lists.append(("faults.uwb_outage.nodes", f.uwb_outage.nodes))
         for field, nodes in node_lists:
@@ -464,7 +557,7 @@ class TaskSpec(Frozen):
             raise ValueError(f"faults.imu_cascade_random.n_faulty={f.imu_cascade_random.n_faulty} must be < n_uav={n}")
         if self.scoring.nodes_from_schedule == "healthy":
             self._check_healthy_scoring()
-        if (f.gps_drifts or f.hybrid_noise) and not gps:
+        if (f.gps_drifts or f.gps_drift_random or f.hybrid_noise) and not gps:
             raise ValueError("GPS faults need sensors.gps_sigma for every UAV")
         if self.sensors.velocity_bias_sigma > 0 and self.sensors.velocity_sigma is None:
             raise ValueError("sensors.velocity_bias_sigma needs sensors.velocity_sigma (a VO sensor)")
@@ -472,8 +565,9 @@ class TaskSpec(Frozen):
                 self.dt <= self.scoring.align_first_seconds <= self.duration - self.scoring.start):
             raise ValueError(f"scoring.align_first_seconds={self.scoring.align_first_seconds} must be 0 or in "
                              f"[dt, duration − scoring.start] = [{self.dt}, {self.duration - self.scoring.start}]")
-        if f.vision_outage is not None and not self.landmarks:
-            raise ValueError("faults.vision_outage needs landmarks")
+        for name in ("vision_outage", "vision_outage_random"):
+            if getattr(f, name) is not None and not self.landmarks:
+                raise ValueError(f"faults.{name} needs landmarks")
         if not (self.anchors or self.landmarks or gps or self.sensors.peers.kind != "none"):
             raise ValueError("a task needs at least one measurement channel (anchors, landmarks, gps or peers)")
         return self

@@ -75,6 +75,11 @@ def _faults(spec: TaskSpec) -> list[str]:
                      f"{list(r.bias_magnitude_range)} m/s²{', blind inside the window' if r.blind else ''}.")
     if (v := f.vision_outage) is not None:
         lines.append(f"Camera outages {list(v.windows)} s: no landmark channel is valid.")
+    if (vr := f.vision_outage_random) is not None:
+        nodes = f"UAVs {list(vr.nodes)}" if vr.nodes else "every UAV"
+        lines.append(f"Random camera outages on {nodes}: {vr.count_range[0]}–{vr.count_range[1]} per episode, "
+                     f"each lasting {vr.duration_range[0]:g}–{vr.duration_range[1]:g} s, one per equal slot of "
+                     f"{vr.span[0]:g}–{vr.span[1]:g} s (drawn per episode); no landmark channel is valid inside.")
     if f.packet_loss:
         lines.append(f"UWB packet loss {f.packet_loss:.0%}.")
     if (o := f.uwb_outage) is not None:
@@ -83,19 +88,29 @@ def _faults(spec: TaskSpec) -> list[str]:
     for d in f.gps_drifts:
         lines.append(f"GPS drift {d.rate:g} m/s along {list(d.direction)} on UAVs {list(d.nodes)}, "
                      f"{d.start:g}–{d.end:g} s.")
-    if (h := f.hybrid_noise) is not None and h.model == "mixture":
-        lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}, a contamination mixture: each fix is "
-                     f"Student-t (scale {h.t_scale:g} m, ν ∈ [{h.dof_low}, {h.dof_high}]) with probability "
-                     f"{h.ratio:g}, else N(0, {h.gauss_sigma:g}² I).")
-    elif h is not None:
-        lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}: v = a·t_ν(σ {h.t_scale:g}) + "
-                     f"(1 − a)·N(0, {h.gauss_sigma:g}²), a = {h.ratio:g}, ν ∈ [{h.dof_low}, {h.dof_high}].")
+    if (dr := f.gps_drift_random) is not None:
+        k = dr.n_drifting_range
+        lines.append(f"Random GPS drift (drawn per episode): {k[0]}–{k[1]} of UAVs {list(dr.nodes)} drift alike "
+                     f"from a start in {list(dr.start_range)} s for {list(dr.duration_range)} s at "
+                     f"{dr.rate_range[0]:g}–{dr.rate_range[1]:g} m/s, {dr.elevation_deg:.3g}° above the horizontal "
+                     "with a uniform azimuth; the offset stays after the window.")
+    if (h := f.hybrid_noise) is not None:
+        r = h.ratio_range
+        ratio = f"{h.ratio:g}" if r is None else f"drawn per episode uniform in [{r[0]:g}, {r[1]:g}]"
+        if h.model == "mixture":
+            lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}, a contamination mixture: each fix is "
+                         f"Student-t (scale {h.t_scale:g} m, ν ∈ [{h.dof_low}, {h.dof_high}]) with probability "
+                         f"{ratio}, else N(0, {h.gauss_sigma:g}² I).")
+        else:
+            lines.append(f"Hybrid GPS noise on UAVs {list(h.nodes) or 'all'}: v = a·t_ν(σ {h.t_scale:g}) + "
+                         f"(1 − a)·N(0, {h.gauss_sigma:g}²), a = {ratio}, ν ∈ [{h.dof_low}, {h.dof_high}].")
     lines += [f"{name}: {value}." for name, value in _other_fields(f, _DESCRIBED_FAULTS)]
     return lines or ["None: Gaussian noise only."]
 
 
 _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cascades", "imu_cascade_random",
-                     "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage"}
+                     "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage",
+                     "vision_outage_random", "gps_drift_random"}
 _DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "peers", "camera_sigma", "camera_max_range",
                       "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
 

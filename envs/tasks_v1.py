@@ -31,9 +31,9 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-from .specs import GpsDrift, NlosGaussMarkov, NlosStep, TaskSpec
+from .specs import GpsDrift, GpsDriftRandom, NlosGaussMarkov, NlosStep, TaskSpec, VisionOutageRandom
 from .tasks import (cascaded_fault, cascaded_fault_random, gradual_fault, hybrid_noise, ideal, nlos, nlos_step,
-                    scale)
+                    scale, vision_loss)
 
 #: the indoor UWB NLOS process of the v1 tasks (module docstring: the UTIL obstacle residuals)
 INDOOR_NLOS = dict(onset_rate=0.08, mean_duration=8.0, mean_bias=0.6, bias_sigma=0.8, tau=2.0, max_bias=5.0)
@@ -192,6 +192,125 @@ def scale_random_shifted_v1() -> TaskSpec:
                                     "faults": {"nlos_gauss_markov": g}})
 
 
+#: the randomized HybridNoise contamination ratio, p ∈ [0.05, 0.5] (spans HybridNoise10/30/50-v1)
+HYBRID_TRAIN_RATIO = (0.05, 0.5)
+#: the shifted split's Student-t degrees of freedom: ν = 2, a heavier tail than training's 3–8
+HYBRID_SHIFTED_DOF = (2, 2)
+
+
+def hybrid_noise_random_v1() -> TaskSpec:
+    """HybridNoise30-v1's chain with the contamination ratio drawn per episode, p uniform in [0.05, 0.5].
+
+    Each episode's share of multipath-hit GPS fixes (trivariate Student-t, scale 1 m, ν 3–8;
+    else N(0, 1 m²)) is drawn from the seed (``specs.HybridNoise.ratio_range``): from an open
+    sky with a few reflections (5 %) to a street where every second fix is hit (50 %),
+    which spans HybridNoise10/30/50-v1. A method trained here cannot tune a gate to one
+    outlier rate.
+    """
+    base = hybrid_noise_v1(30)()
+    h = {**base.faults.hybrid_noise.model_dump(), "ratio_range": HYBRID_TRAIN_RATIO}
+    return TaskSpec.model_validate({**base.model_dump(), "name": "HybridNoiseRandom",
+                                    "faults": {**base.faults.model_dump(), "hybrid_noise": h}})
+
+
+def hybrid_noise_random_shifted_v1() -> TaskSpec:
+    """HybridNoiseRandom-v1 shifted: heavier-tailed outliers, ν = 2 instead of 3–8.
+
+    The multipath-hit fixes are Student-t with ν = 2 (a finite mean, an infinite variance),
+    beyond the ν ≈ 2.5–8 of scaled-t fits to real GPS position errors: the long
+    reflected paths of a deep urban canyon, whose rare errors of tens of metres no training
+    episode shows. The outlier rate (p uniform in [0.05, 0.5]) is the training one, so only
+    the tail is out of distribution. (More outliers of the training tail, p 0.5–0.8, would
+    be shifted too, but a scale-1 m t with ν 3–8 is within a factor 1.7 of the 1 m Gaussian
+    in spread, and that split would not differ from training.)
+    """
+    base = hybrid_noise_random_v1()
+    h = {**base.faults.hybrid_noise.model_dump(), "dof_low": HYBRID_SHIFTED_DOF[0], "dof_high": HYBRID_SHIFTED_DOF[1]}
+    return TaskSpec.model_validate({**base.model_dump(), "name": "HybridNoiseRandomShifted",
+                                    "faults": {**base.faults.model_dump(), "hybrid_noise": h}})
+
+
+#: the randomized GPS drift of GradualFaultRandom: either or both followers drift alike, from
+#: 50–150 s for 50–100 s, at 0.05–0.25 m/s (GradualFault-v1's 0.17 m/s inside), at GradualFault-v1's
+#: 35.3° above the horizontal (its (1, 1, 1) direction) with a random azimuth
+GPS_DRIFT_TRAIN = dict(nodes=(1, 2), n_drifting_range=(1, 2), start_range=(50.0, 150.0), duration_range=(50.0, 100.0),
+                       rate_range=(0.05, 0.25), elevation_deg=math.degrees(math.asin(1.0 / math.sqrt(3.0))))
+#: the shifted split: a spoofer's drag-off at 0.3–0.5 m/s (faster than any training drift)
+GPS_DRIFT_SHIFTED = {**GPS_DRIFT_TRAIN, "rate_range": (0.3, 0.5)}
+
+
+def gradual_fault_random_v1() -> TaskSpec:
+    """GradualFault-v1's formation with the GPS drift drawn per episode (``specs.GpsDriftRandom``).
+
+    One or both followers (which ones drawn) drift alike, as a slowly ramping satellite
+    signal or a spoofer's drag-off moves every receiver that tracks it: onset uniform in
+    50–150 s, duration 50–100 s, speed 0.05–0.25 m/s (GradualFault-v1's 0.17 m/s inside; over
+    the window an offset of 2.5–25 m against the followers' 3 m GPS), direction 35° above the
+    horizontal (GradualFault-v1's) with a uniform azimuth; the offset stays after the window.
+    ``fault_rmse`` covers the steps with a drifting fix (the window differs per episode).
+    """
+    base = gradual_fault_v1()
+    return _v1(base, name="GradualFaultRandom",
+               faults={**base.faults.model_dump(), "gps_drifts": [],
+                       "gps_drift_random": GpsDriftRandom(**GPS_DRIFT_TRAIN).model_dump()},
+               scoring={**base.scoring.model_dump(), "fault_window": None})
+
+
+def gradual_fault_random_shifted_v1() -> TaskSpec:
+    """GradualFaultRandom-v1 shifted: faster drifts, 0.3–0.5 m/s instead of 0.05–0.25 m/s.
+
+    A spoofer's drag-off: the 2013 yacht spoofing trial (Bhatti & Humphreys) turned its
+    victim 3° off course unnoticed; at the formation's 10 m/s a drag of 1.7–2.9° moves the
+    fix at 0.3–0.5 m/s, 15–50 m over the window, beyond any training offset. Slower drifts
+    (0.02–0.05 m/s: 1–5 m, within 1.7 σ of the followers' 3 m GPS) would be shifted too, but
+    they hide in the noise: they cost uniform trust little and the oracle equals uniform
+    there, so that split would measure noise.
+    """
+    base = gradual_fault_random_v1()
+    return TaskSpec.model_validate({**base.model_dump(), "name": "GradualFaultRandomShifted",
+                                    "faults": {**base.faults.model_dump(),
+                                               "gps_drift_random": GpsDriftRandom(**GPS_DRIFT_SHIFTED).model_dump()}})
+
+
+#: the randomized camera outages of VisionLossRandom, placed in 10–90 s of the 100 s episode:
+#: training 1–2 outages of 5–10 s, shifted 2–3 outages of 10–20 s
+VISION_OUTAGE_TRAIN = dict(count_range=(1, 2), duration_range=(5.0, 10.0), span=(10.0, 90.0))
+VISION_OUTAGE_SHIFTED = dict(count_range=(2, 3), duration_range=(10.0, 20.0), span=(10.0, 90.0))
+
+
+def _vision_loss_random(base: TaskSpec, name: str, outages: dict) -> TaskSpec:
+    """``base`` (a VisionLoss task) as version 1 named ``name``, its camera outages drawn per episode."""
+    return _v1(base, name=name,
+               faults={**base.faults.model_dump(), "vision_outage": None,
+                       "vision_outage_random": VisionOutageRandom(**outages).model_dump()},
+               scoring={**base.scoring.model_dump(), "fault_window": None})
+
+
+def vision_loss_random_v1() -> TaskSpec:
+    """VisionLoss-v0's hall and swarm with the camera outages drawn per episode: 1–2 outages of 5–10 s.
+
+    The whole swarm's cameras black out (a lighting failure, smoke or dust in the hall), as in
+    VisionLoss, but how often, when and for how long is drawn from the seed
+    (``specs.VisionOutageRandom``): one or two outages of 5–10 s each (VisionLoss' are 10 s),
+    one in each equal slot of 10–90 s. During an outage only the peer ranges and the IMU
+    hold the swarm. The outage windows differ per episode, so the task defines no fixed
+    fault window (``fault_rmse`` is null).
+    """
+    # built on VisionLoss-v0: switch the base to vision_loss_v1() once VisionLoss-v1 is calibrated
+    return _vision_loss_random(vision_loss(), "VisionLossRandom", VISION_OUTAGE_TRAIN)
+
+
+def vision_loss_random_shifted_v1() -> TaskSpec:
+    """VisionLossRandom-v1 shifted: 2–3 outages of 10–20 s each instead of 1–2 of 5–10 s.
+
+    Longer blackouts than any in training (a dark section of the hall, a sustained smoke
+    plume): dead reckoning with peer ranges drifts for up to 20 s at a time, 20–60 s in all
+    instead of 5–20 s.
+    """
+    # built on VisionLoss-v0: switch the base to vision_loss_v1() once VisionLoss-v1 is calibrated
+    return _vision_loss_random(vision_loss(), "VisionLossRandomShifted", VISION_OUTAGE_SHIFTED)
+
+
 #: registered ID → spec factory, the v1 simulated tasks (``tasks.CATALOGUE`` includes them)
 CATALOGUE_V1: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/Ideal-v1": ideal_v1,
@@ -207,6 +326,12 @@ CATALOGUE_V1: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/ScaleRandom-v1": scale_random_v1,
     "swarmloc/ScaleRandomShifted-v1": scale_random_shifted_v1,
     "swarmloc/CascadedFaultRandomShifted-v1": cascaded_fault_random_shifted_v1,
+    "swarmloc/HybridNoiseRandom-v1": hybrid_noise_random_v1,
+    "swarmloc/HybridNoiseRandomShifted-v1": hybrid_noise_random_shifted_v1,
+    "swarmloc/GradualFaultRandom-v1": gradual_fault_random_v1,
+    "swarmloc/GradualFaultRandomShifted-v1": gradual_fault_random_shifted_v1,
+    "swarmloc/VisionLossRandom-v1": vision_loss_random_v1,
+    "swarmloc/VisionLossRandomShifted-v1": vision_loss_random_shifted_v1,
 }
 
 #: the Version History line of each v1 task: what changed from v0 and why (task_envs adds it)
@@ -237,4 +362,17 @@ HISTORY_V1: dict[str, str] = {
     "swarmloc/ScaleRandom-v1": "v1: new, the randomized Scale scenario (training split).",
     "swarmloc/ScaleRandomShifted-v1": "v1: new, the shifted split of ScaleRandom-v1.",
     "swarmloc/CascadedFaultRandomShifted-v1": "v1: new, the shifted split of CascadedFaultRandom-v1.",
+    "swarmloc/HybridNoiseRandom-v1": "v1: new, the randomized HybridNoise scenario (training split): the "
+                                     "contamination ratio drawn per episode in [0.05, 0.5].",
+    "swarmloc/HybridNoiseRandomShifted-v1": "v1: new, the shifted split of HybridNoiseRandom-v1 (Student-t "
+                                            "outliers with ν = 2 instead of 3–8).",
+    "swarmloc/GradualFaultRandom-v1": "v1: new, the randomized GradualFault scenario (training split): the GPS "
+                                      "drift's onset, duration, speed (0.05–0.25 m/s), azimuth and followers drawn "
+                                      "per episode.",
+    "swarmloc/GradualFaultRandomShifted-v1": "v1: new, the shifted split of GradualFaultRandom-v1 (drifts of "
+                                             "0.3–0.5 m/s).",
+    "swarmloc/VisionLossRandom-v1": "v1: new, the randomized VisionLoss scenario (training split): 1–2 camera "
+                                    "outages of 5–10 s drawn per episode.",
+    "swarmloc/VisionLossRandomShifted-v1": "v1: new, the shifted split of VisionLossRandom-v1 (2–3 outages of "
+                                           "10–20 s).",
 }

@@ -191,7 +191,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
     landmark_offset = fs.landmark_offset
     gm_params = fs.gm_param  # (B, 6) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
-    h = fs.hybrid_param  # [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
+    hybrid_params = fs.hybrid_param  # (B, 6) [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
     n, n_l = z.shape[1], z.shape[2]
     # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
     p, v, a = np.empty(3), np.empty(3), np.empty(3)
@@ -234,6 +234,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
         # Gauss–Markov constants (τ > 0 whenever the process is on): onset probability per
         # step and the AR(1) coefficient φ = exp(−dt/τ) with its innovation scale σ√(1−φ²)
         g = gm_params[b]
+        h = hybrid_params[b]
         p_on, phi, gm_step_sigma = 0.0, 0.0, 0.0
         if g[4] > 0.0:
             p_on = 1.0 - math.exp(-g[0] * w.dt)
