@@ -127,3 +127,12 @@ def test_demo_tables(tmp_path):
     assert sorted(p.name for p in (tmp_path / "results").glob("*.json")) == ["chi2-soft.json", "oracle.json",
                                                                             "uniform.json"]
     assert results["chi2-soft"].aggregates["swarmloc/NLOSStep-v0"]["normalized_score"].mean > 0.9
+
+
+def test_plot_command_draws_every_channel_kind(tmp_path):
+    # TDOA channels (the last kind) once had no trust-plot colour; chi2-gate reports its trust
+    out = tmp_path / "tdoa.json"
+    assert cli.main(["evaluate", "--method", "chi2-gate", "--suite", "quick-v1", "--tasks", "TDOA-v1",
+                     "--out", str(out), "--no-progress"]) == 0
+    assert cli.main(["plot", str(out), "--out", str(tmp_path / "plots")]) == 0
+    assert (tmp_path / "plots" / "trust_TDOA-v1.png").is_file()

@@ -37,7 +37,9 @@ from swarmloc.bench.evaluation.runner import Trace, read_traces, rollout, traces
 from swarmloc.envs.channels import KIND_NAMES  # noqa: E402
 from swarmloc.envs.tasks import get_spec  # noqa: E402
 
-_KIND_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
+#: one colour per channel kind, in ``KIND_NAMES`` order
+_KIND_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
+assert len(_KIND_COLOURS) == len(KIND_NAMES), "every channel kind needs a colour"
 _DPI = 90
 #: at most this many channels per trust panel and UAVs per trajectory panel (large swarms)
 MAX_CHANNELS, MAX_UAVS = 12, 8
