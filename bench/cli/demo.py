@@ -82,7 +82,7 @@ def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: boo
     from rich.markup import escape
 
     from swarmloc.bench.evaluation.demo import run_demo
-    from swarmloc.bench.evaluation.suites import get_suite, missing_data
+    from swarmloc.bench.evaluation.suites import Suite, get_suite, missing_data
 
     suite = get_suite(suite_name)
     missing = missing_data(suite)
@@ -94,5 +94,9 @@ def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: boo
                         "them with `swarmloc data import-util` and `swarmloc data import-util-tdoa` (see README, "
                         f"'Real flights').")
         return False
-    run_demo(methods, suite, out, workers=workers, plots=plots, backend=backend, address=address)
+    # every seed of a recorded flight replays the same recording (the seed moves only the initial
+    # prior), so the demo runs one seed per flight; `swarmloc evaluate --suite real-v1` runs all four
+    first = tuple((task, suite.seeds(task)[0]) for task in suite.tasks)
+    one_seed = Suite(f"{suite.name}-first-seed", suite.version, first, f"{suite.name}, the first seed of each flight")
+    run_demo(methods, one_seed, out, workers=workers, plots=plots, backend=backend, address=address)
     return True
