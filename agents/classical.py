@@ -4,7 +4,10 @@ Every policy maps the pending update's raw fields to a trust α ∈ [0, 1] per c
 environment's CEKF turns it into ``R = R0 / max(α, α_min)`` and skips channels with
 ``α ≤ α_th`` (0.05). The degrees of freedom of a channel's normalised innovation squared
 (NIS) are its scalar rows: 1 for anchor/peer ranges, 3 for landmark, GPS and relative
-position channels.
+position channels. On v1 tasks a peer channel's NIS includes the neighbour's broadcast
+covariance (``TaskSpec.peer_nis_neighbour_cov``, docs/world.md), so every rule below that reads
+the NIS gates peers against the corrected statistic there. Sequential detection and integrity
+monitoring (``cusum``, ``raim``) are in ``integrity.py`` (docs/methods.md).
 
 | name | rule | source |
 |---|---|---|

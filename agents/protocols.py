@@ -97,6 +97,8 @@ class TaskFacts:
         keys: ``(B,)`` per-episode random keys (see :func:`episode_keys`).
         velocity_sigma: nominal visual-odometry velocity std per axis [m/s], None when the
             task has no VO sensor (then ``Measurements.velocity`` is None).
+        peer_nis_neighbour_cov: a peer channel's observed NIS includes the neighbour's
+            broadcast covariance (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks).
     """
 
     task_id: str
@@ -118,6 +120,7 @@ class TaskFacts:
     alpha_min: float
     keys: np.ndarray
     velocity_sigma: float | None = None
+    peer_nis_neighbour_cov: bool = False
 
     @property
     def batch_size(self) -> int:
@@ -172,6 +175,7 @@ class TaskFacts:
             alpha_th=float(spec.filter.alpha_th), alpha_min=float(spec.filter.alpha_min),
             keys=_frozen_array(np.array(keys, dtype=np.int64)),
             velocity_sigma=None if spec.sensors.velocity_sigma is None else float(spec.sensors.velocity_sigma),
+            peer_nis_neighbour_cov=bool(spec.peer_nis_neighbour_cov),
         )
 
 
@@ -236,7 +240,8 @@ class TrustInput:
         obs: ``(B, N, L, F)`` float32 features in [0, 1] (``build_observation``).
         resid: ``(B, N, L)`` innovation magnitude ‖y‖ at the prior [m] (0 if absent).
         pred: ``(B, N, L)`` predicted distance to the channel's target [m].
-        nis: ``(B, N, L)`` normalised innovation squared with the nominal R0.
+        nis: ``(B, N, L)`` normalised innovation squared with the nominal R0 (v1 tasks: a
+            peer channel's includes the neighbour's broadcast covariance, docs/world.md).
         applied: ``(B, N, L)`` trust applied at the previous update (1 after reset).
         jerk: ``(B, N)`` IMU jerk ‖u(k) − u(k−1)‖ [m/s²].
         valid: ``(B, N, L)`` bool, measurement present.

@@ -93,7 +93,8 @@ class TrustEstimator:
         # x⁻ = F x + G u, P⁻ = F P Fᵀ + Q; broadcast priors for the peer channels
         cekf.cekf_predict(self.x, self.P, imu, f.dt, f.imu_sigma, self._prior_pos)
         cekf.channel_features(self.x, self.P, z, valid, self._kind, self._target, self._r0, self._anchors,
-                              self._landmarks, self._prior_pos, feat.resid, feat.pred, feat.nis)
+                              self._landmarks, self._prior_pos, f.peer_nis_neighbour_cov, feat.resid, feat.pred,
+                              feat.nis)
         feat.jerk[:] = np.linalg.norm(imu - self._prev_imu, axis=-1)
         feat.valid[:] = valid
         self._prev_imu[:] = imu

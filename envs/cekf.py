@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER, TDOA
+from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
 from .cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
 
 _MIN_RANGE = 1e-9
@@ -224,13 +224,18 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
 
 
 @njit(cache=True, inline="always")
-def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, resid, pred, nis, yv, S):
+def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, prior_cov, peer_cov,
+                 resid, pred, nis, yv, S):
     """Innovation features of one UAV's L channels at its prior (see ``channel_features``).
 
     Args:
         x, P: the UAV's prior mean ``(6,)`` and covariance ``(6, 6)``.
         z: ``(L, 3)`` measurements; valid ``(L,)``; kind, target, r0 ``(L,)``.
         anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        prior_cov: ``(N, 6, 6)`` the UAVs' prior covariances (the broadcast P_j; read only
+            when ``peer_cov``).
+        peer_cov: add the neighbour's broadcast covariance to a peer channel's S (v1 tasks,
+            ``TaskSpec.peer_nis_neighbour_cov``); False keeps the v0 NIS bit for bit.
         resid, pred, nis: ``(L,)`` outputs.
         yv, S: scratch 3-vector and 3×3 matrix.
     """
@@ -255,6 +260,13 @@ def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos
             s = (h0 * (P[0, 0] * h0 + P[0, 1] * h1 + P[0, 2] * h2)
                  + h1 * (P[1, 0] * h0 + P[1, 1] * h1 + P[1, 2] * h2)
                  + h2 * (P[2, 0] * h0 + P[2, 1] * h1 + P[2, 2] * h2) + r0[l])
+            if peer_cov and ch == PEER:
+                # v1: S += u P_j uᵀ, the neighbour's broadcast prior p̂_j is uncertain too (∂h/∂p_j = −u;
+                # the CEKF keeps no cross-covariance of i and j, so none is added)
+                Pj = prior_cov[j]
+                s += (h0 * (Pj[0, 0] * h0 + Pj[0, 1] * h1 + Pj[0, 2] * h2)
+                      + h1 * (Pj[1, 0] * h0 + Pj[1, 1] * h1 + Pj[1, 2] * h2)
+                      + h2 * (Pj[2, 0] * h0 + Pj[2, 1] * h1 + Pj[2, 2] * h2))
             resid[l] = abs(y)
             pred[l] = rng
             nis[l] = y * y / s
@@ -289,19 +301,26 @@ def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos
             for r_ in range(3):
                 for c_ in range(3):
                     S[r_, c_] = P[r_, c_] + (r0[l] if r_ == c_ else 0.0)
+            if peer_cov and ch == PEER_REL:
+                # v1: S += P_j,pp for a relative position to the neighbour's broadcast prior
+                for r_ in range(3):
+                    for c_ in range(3):
+                        S[r_, c_] += prior_cov[j, r_, c_]
             nis[l] = _quad_inv3(S, yv)
             resid[l] = math.sqrt(yv[0] * yv[0] + yv[1] * yv[1] + yv[2] * yv[2])
             pred[l] = math.sqrt(dist2) if ch != GPS else 0.0
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos,
+def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, peer_cov,
                      resid, pred, nis):
     """Per-channel innovation features at the prior (before the policy picks trust).
 
     Outputs ``(B, N, L)``: resid = ‖y‖ (innovation magnitude), pred = predicted distance
     ‖h(x⁻)‖ to the channel's target (0 for GPS; the predicted range difference's magnitude
-    for TDOA), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0.
+    for TDOA), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0; with ``peer_cov`` (v1 tasks) a peer
+    channel's S also holds the neighbour's broadcast covariance: + u P_j⁻ uᵀ for a range,
+    + P_j,pp⁻ for a relative position (P holds every UAV's prior, so P[b, j] is P_j⁻).
     Invalid channels get zeros.
     """
     n_b, n = z.shape[0], z.shape[1]
@@ -310,7 +329,7 @@ def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior
         S = np.empty((3, 3))
         for i in range(n):
             features_uav(x[b, i], P[b, i], z[b, i], valid[b, i], kind[i], target[i], r0[i], anchors, landmarks,
-                         prior_pos[b], resid[b, i], pred[b, i], nis[b, i], yv, S)
+                         prior_pos[b], P[b], peer_cov, resid[b, i], pred[b, i], nis[b, i], yv, S)
 
 
 @njit(cache=True, inline="always")

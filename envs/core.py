@@ -31,7 +31,8 @@ class CoreStep:
     Attributes:
         resid: ``(B, N, L)`` innovation magnitude ‖y‖ of the pending measurements [m].
         pred: ``(B, N, L)`` predicted distance ‖h(x⁻)‖ [m].
-        nis: ``(B, N, L)`` normalised innovation squared with nominal R0.
+        nis: ``(B, N, L)`` normalised innovation squared with nominal R0 (v1 tasks: a peer
+            channel's S includes the neighbour's broadcast covariance, ``cekf.channel_features``).
         prev_trust: ``(B, N, L)`` trust applied at the previous update.
         jerk: ``(B, N)`` IMU jerk ‖u(k) − u(k−1)‖ [m/s²].
         valid: ``(B, N, L)`` pending measurement present.
@@ -119,7 +120,8 @@ class LinkTrustCore:
         w, s, o, buf = self.world, self.spec, self._out, self.world.buffers
         self._filter = FilterArrays(
             dt=float(s.dt), imu_sigma=float(s.sensors.imu_sigma), alpha_th=float(s.filter.alpha_th),
-            alpha_min=float(s.filter.alpha_min), n_steps=int(s.n_steps), kind=self.layout.kind,
+            alpha_min=float(s.filter.alpha_min), n_steps=int(s.n_steps), peer_cov=bool(s.peer_nis_neighbour_cov),
+            kind=self.layout.kind,
             target=self.layout.target, r0=self._r0, sigma=np.ascontiguousarray(self.layout.sigma),
             label_threshold=self.label_threshold, anchors=w.anchors, landmarks=w.landmarks, world_pos=buf.pos,
             world_imu=buf.imu, world_z=buf.z, world_valid=buf.valid, world_label=buf.label,

@@ -48,6 +48,8 @@ class FilterArrays(NamedTuple):
         alpha_th: trust at or below which a channel is left out of the update;
             alpha_min: floor of α in R = R0 / max(α, α_min).
         n_steps: updates per episode.
+        peer_cov: a peer channel's NIS includes the neighbour's broadcast covariance
+            (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks; v0 keeps S = H P_i Hᵀ + R0).
         kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²];
             sigma ``(N, L)`` the nominal σ [m] (labels v1 divide by it, as the world does).
         label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff.
@@ -83,6 +85,7 @@ class FilterArrays(NamedTuple):
     alpha_th: float
     alpha_min: float
     n_steps: int
+    peer_cov: bool
     kind: np.ndarray
     target: np.ndarray
     r0: np.ndarray
@@ -187,8 +190,8 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
         pos_b, prior_b, P_b = f.world_pos[b], f.prior_pos[b], f.P[b]
         for i in range(n):
             features_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], f.kind[i], f.target[i],
-                         f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.resid[b, i], f.pred[b, i], f.nis[b, i],
-                         yv, S)
+                         f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], P_b, f.peer_cov, f.resid[b, i],
+                         f.pred[b, i], f.nis[b, i], yv, S)
             # jerk = ‖u(k+1) − u(k)‖
             j0 = f.world_imu[b, i, 0] - f.imu_prev[b, i, 0]
             j1 = f.world_imu[b, i, 1] - f.imu_prev[b, i, 1]

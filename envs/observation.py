@@ -7,6 +7,11 @@ valid mask. A TDOA channel (range difference of an anchor pair) sets the anchor 
 of the one-hot (``channels.OBS_KIND_COLUMN``), its d̂ is the predicted range difference
 |‖p⁻ − a_j‖ − ‖p⁻ − a_i‖|, and r and the NIS are those of the scalar row, as for a range. Unbounded magnitudes are squashed with x / (x + s), a monotone map of
 [0, ∞) onto [0, 1) whose scale s (below) sits at 0.5; ``unsquash`` inverts it.
+
+The NIS is yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0 (P⁻ the UAV's prior covariance). v1 tasks: the
+peer NIS includes the neighbour's broadcast covariance, S = u P_i⁻ uᵀ + u P_j⁻ uᵀ + R0 for a
+peer range and P_i⁻ + P_j⁻ + R0 I for a relative position (``TaskSpec.peer_nis_neighbour_cov``,
+``cekf.channel_features``); v0 tasks keep the v0 NIS bit for bit.
 """
 
 from __future__ import annotations

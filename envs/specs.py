@@ -615,3 +615,14 @@ class TaskSpec(Frozen):
     @property
     def scored_nodes(self) -> tuple[int, ...]:
         return self.scoring.nodes or tuple(range(self.n_uav))
+
+    @property
+    def peer_nis_neighbour_cov(self) -> bool:
+        """Whether a peer channel's observed NIS includes the neighbour's broadcast covariance.
+
+        v1 tasks (``version >= 1``): S = H P_i Hᵀ + u P_j uᵀ + R0 for a peer range and
+        P_i + P_j + R0 I for a relative position, the variance of the innovation against a
+        neighbour's prior p̂_j with covariance P_j (docs/world.md, "What a Track A policy
+        observes"). v0 tasks keep S = H P_i Hᵀ + R0, bit for bit (frozen).
+        """
+        return self.version >= 1

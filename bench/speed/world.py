@@ -93,7 +93,7 @@ class UnfusedCore:
         self.z[:] = buf.z
         self.valid[:] = buf.valid
         cekf.channel_features(self.x, self.P, self.z, self.valid, lay.kind, lay.target, self.r0, w.anchors,
-                              w.landmarks, self.prior_pos, o["resid"], o["pred"], o["nis"])
+                              w.landmarks, self.prior_pos, s.peer_nis_neighbour_cov, o["resid"], o["pred"], o["nis"])
         o["jerk"][:] = np.linalg.norm(buf.imu - prev_imu, axis=-1)
         o["valid"][:] = self.valid
 
