@@ -18,7 +18,8 @@ from .channels import ANCHOR, PEER, PEER_REL, TDOA, ChannelLayout
 from .rng import Stream, normal, uniform
 from .specs import GpsDriftRandom, TaskSpec, VisionOutageRandom
 
-BIAS_CONSTANT, BIAS_UNIFORM = 0, 1
+#: range-bias window modes: constant ``a``; uniform in [a, b] per draw; rising linearly from 0 to ``a`` over ``b`` s
+BIAS_CONSTANT, BIAS_UNIFORM, BIAS_RAMP = 0, 1, 2
 #: ``hybrid_param[5]``: the hybrid GPS noise model (``specs.HybridNoise.model``)
 HYBRID_WEIGHTED_SUM, HYBRID_MIXTURE = 0, 1
 
@@ -38,7 +39,8 @@ class FaultSchedule(NamedTuple):
 
     Attributes:
         bias_time: ``(B, W, 2)`` range-bias windows [start, end).
-        bias_param: ``(B, W, 3)`` [mode, a, b]: constant ``a``, or uniform in [a, b] per draw.
+        bias_param: ``(B, W, 3)`` [mode, a, b]: constant ``a``, uniform in [a, b] per draw, or rising
+            linearly from 0 to ``a`` over the first ``b`` seconds of the window (``BIAS_*``).
         bias_mask: ``(B, W, N, L)`` channels a bias window hits.
         imu_time: ``(B, Wi, 2)`` IMU-fault windows.
         imu_bias: ``(B, Wi, 3)`` accelerometer bias added inside the window [m/s²].
@@ -50,9 +52,9 @@ class FaultSchedule(NamedTuple):
             range / peer channels each window silences.
         drift_time: ``(B, Wg, 2)`` GPS drift windows; ``drift_rate`` ``(B, Wg, 3)`` [m/s];
             ``drift_nodes`` ``(B, Wg, N)``.
-        gm_mask: ``(B, N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(B, 6)``
-            [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias] (per episode:
-            a randomized scenario draws them from the seed).
+        gm_mask: ``(B, N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(B, 7)``
+            [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias, ramp onset (1/0)]
+            (per episode: a randomized scenario draws them from the seed).
         hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(B, 6)``
             [ratio, t_scale, gauss_sigma, dof_low, dof_high, model] (model
             ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``; per episode: a randomized
@@ -140,7 +142,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
                 mask[i, col] = True
         bias_rows.append((
             np.tile([step.start, step.end], (n_b, 1)),
-            np.tile([BIAS_CONSTANT, step.bias, step.bias], (n_b, 1)),
+            np.tile([BIAS_RAMP, step.bias, step.ramp] if step.ramp > 0 else [BIAS_CONSTANT, step.bias, step.bias],
+                    (n_b, 1)),
             np.broadcast_to(mask, (n_b, n, n_l)).copy(),
         ))
     if f.nlos_uniform is not None:
@@ -214,13 +217,14 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         drift_rows.append(_random_drift(f.gps_drift_random, n, seeds))
 
     gm_mask = np.zeros((n_b, n, n_l), dtype=np.bool_)
-    gm_param = np.zeros((n_b, 6))
+    gm_param = np.zeros((n_b, 7))
     if f.nlos_gauss_markov is not None:
         g = f.nlos_gauss_markov
         kinds = [ANCHOR, TDOA] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
         eligible = np.isin(layout.kind, kinds) & layout.linked & _node_mask(g.nodes, n)[:, None]
         gm_mask[:] = eligible
-        gm_param[:] = [g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias]
+        gm_param[:] = [g.onset_rate, g.mean_duration, g.mean_bias, g.bias_sigma, g.tau, g.max_bias,
+                       float(g.onset == "ramp")]
         for b, seed in enumerate(seeds):
             draw = lambda k: uniform(int(seed), 0, Stream.SCHEDULE, GM_DRAWS + k)  # noqa: E731
             if g.onset_rate_range is not None:

@@ -212,11 +212,16 @@ class NlosStep(Frozen):
     start: NonNegFloat
     end: PositiveFloat
     bias: PositiveFloat
+    ramp: NonNegFloat = Field(
+        default=0.0, description="seconds over which the bias grows linearly from 0 to `bias` (an obstacle moving "
+                                 "into the path); 0 = a step (v0)")
 
     @model_validator(mode="after")
     def _window(self) -> "NlosStep":
         if self.end <= self.start:
             raise ValueError(f"end={self.end} must be > start={self.start}")
+        if self.ramp > self.end - self.start:
+            raise ValueError(f"ramp={self.ramp} must be <= end − start = {self.end - self.start}")
         return self
 
 
@@ -227,6 +232,10 @@ class NlosGaussMarkov(Frozen):
     exponential time of mean ``mean_duration``; during it the bias follows a first-order
     Gauss–Markov process around ``mean_bias`` with time constant ``tau`` and stationary
     std ``bias_sigma``, clipped to [0, max_bias].
+
+    With ``onset="ramp"`` an NLOS episode starts at zero bias and relaxes towards the mean
+    (b ← μ + φ(b − μ) + σ√(1−φ²)·n from b = 0), as when an obstacle moves into the path
+    progressively; a one-step innovation test then sees no jump at the onset.
 
     Randomized scenarios (the ``*Random`` tasks) draw per episode, from the episode seed:
     the onset rate uniformly in ``onset_rate_range``, the mean bias log-uniformly in
@@ -249,6 +258,10 @@ class NlosGaussMarkov(Frozen):
         default=None, description="per-episode mean bias, log-uniform in [low, high] [m]; None = mean_bias")
     link_fraction: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
         default=1.0, description="probability that an eligible link is NLOS-prone in an episode (drawn per episode)")
+    onset: Literal["jump", "ramp"] = Field(
+        default="jump", description="'jump': an NLOS episode starts at a bias drawn from the stationary law (v0); "
+                                    "'ramp': it starts at 0 and the Gauss–Markov process relaxes towards the mean "
+                                    "with time constant tau (the path is blocked progressively)")
 
     @model_validator(mode="after")
     def _ranges(self) -> "NlosGaussMarkov":

@@ -16,7 +16,10 @@ Two sources recur:
   So biases near the noise floor are the common case and metres the tail: a Gauss–Markov
   bias around 0.6 m with σ 0.8 m (clipped to [0, 5] m), τ 2 s, episodes of 8 s starting at
   0.08 /s per link, which keeps about 40 % of the links biased at any time: several at once,
-  so a gate loses its reference.
+  so a gate loses its reference. An episode starts at zero bias and grows towards its mean
+  (``onset="ramp"``): a UAV flies behind an obstacle over seconds, the excess path grows
+  with it, and there is no jump for a one-step innovation test to see (v0's biases
+  appeared at full size in one step).
 * **Randomized scenarios** (``*Random-v1``): the scenario parameters are drawn per episode
   from the seed within documented ranges (``specs.NlosGaussMarkov`` ``*_range``,
   ``specs.ImuCascadeRandom``); the ``*RandomShifted-v1`` task of a family draws outside the
@@ -36,7 +39,8 @@ from .tasks import (cascaded_fault, cascaded_fault_random, gradual_fault, hybrid
                     nlos_step, scale, vision_loss)
 
 #: the indoor UWB NLOS process of the v1 tasks (module docstring: the UTIL obstacle residuals)
-INDOOR_NLOS = dict(onset_rate=0.08, mean_duration=8.0, mean_bias=0.6, bias_sigma=0.8, tau=2.0, max_bias=5.0)
+INDOOR_NLOS = dict(onset_rate=0.08, mean_duration=8.0, mean_bias=0.6, bias_sigma=0.8, tau=2.0, max_bias=5.0,
+                   onset="ramp")
 #: the training ranges of the randomized NLOS scenarios: onset rate [1/s] (uniform), mean bias
 #: [m] (log-uniform: 0.3 m is 2σ of the ranging noise, 3 m a metal-obstacle path), and the share
 #: of links that are NLOS-prone at all in an episode
@@ -72,11 +76,13 @@ def nlos_step_v1() -> TaskSpec:
 
     An obstacle between the swarm and one side of the room (anchors 0, 2 and 4) adds 1.0, 0.5
     and 0.6 m (2.5–7 σ of the 0.15 m ranging noise; the UTIL obstacle residuals), instead of
-    v0's single +3 m anchor that any gate isolates against seven clean ones.
+    v0's single +3 m anchor that any gate isolates against seven clean ones. The biases grow
+    linearly over the first 5 s of the window (the swarm flies behind the obstacle at
+    1–2.5 m/s) and vanish at 30 s.
     """
-    steps = (NlosStep(target="anchor", index=0, start=20.0, end=30.0, bias=1.0),
-             NlosStep(target="anchor", index=2, start=20.0, end=30.0, bias=0.5),
-             NlosStep(target="anchor", index=4, start=20.0, end=30.0, bias=0.6))
+    steps = (NlosStep(target="anchor", index=0, start=20.0, end=30.0, bias=1.0, ramp=5.0),
+             NlosStep(target="anchor", index=2, start=20.0, end=30.0, bias=0.5, ramp=5.0),
+             NlosStep(target="anchor", index=4, start=20.0, end=30.0, bias=0.6, ramp=5.0))
     return _v1(nlos_step(), faults={"nlos_steps": [s.model_dump() for s in steps]})
 
 
@@ -369,10 +375,10 @@ HISTORY_V1: dict[str, str] = {
     "swarmloc/Ideal-v1": "v1: the world unchanged; the control task of benchmark v1 (labels v1, the information bound, "
                          "score v1).",
     "swarmloc/NLOS-v1": "v1: the indoor NLOS process (bias around 0.6 m, σ 0.8 m, about 40 % of the links biased at "
-                        "once: the UTIL obstacle residuals) instead of rare 2.5 m biases that a one-step χ² gate "
-                        "removes.",
-    "swarmloc/NLOSStep-v1": "v1: three anchors of one side biased at once by 0.5–1.0 m (near the noise floor) instead "
-                            "of one anchor by 3 m.",
+                        "once: the UTIL obstacle residuals; episodes grow from zero) instead of rare 2.5 m biases, "
+                        "at full size at once, that a one-step χ² gate removes.",
+    "swarmloc/NLOSStep-v1": "v1: three anchors of one side biased at once by 0.5–1.0 m (near the noise floor), growing "
+                            "over 5 s, instead of one anchor jumping by 3 m.",
     **{f"swarmloc/Scale{n}-v1": "v1: the indoor NLOS process on every peer link and clean anchors instead of NLOS on "
                                 "every second UAV's links, so uniform trust degrades with N (madrl Table 4)."
        for n in (2, 4, 6, 8, 16, 32)},

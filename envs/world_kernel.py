@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from .channels import ANCHOR, LANDMARK, PEER, PEER_REL, TDOA
-from .faults import BIAS_UNIFORM, HYBRID_MIXTURE, FaultSchedule
+from .faults import BIAS_RAMP, BIAS_UNIFORM, HYBRID_MIXTURE, FaultSchedule
 from .labels import own_sigmas
 from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
 from .trajectories import truth_at
@@ -190,7 +190,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     drift_time, drift_rate, drift_nodes = fs.drift_time, fs.drift_rate, fs.drift_nodes
     gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
     landmark_offset = fs.landmark_offset
-    gm_params = fs.gm_param  # (B, 6) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias]
+    gm_params = fs.gm_param  # (B, 7) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias, ramp]
     hybrid_params = fs.hybrid_param  # (B, 6) [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
     n, n_l = z.shape[1], z.shape[2]
     # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
@@ -282,6 +282,8 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             lo_b, hi_b = bias_param[b, wi, 1], bias_param[b, wi, 2]
                             if bias_param[b, wi, 0] == BIAS_UNIFORM:
                                 err += lo_b + (hi_b - lo_b) * uniform_at(key_uniform, idx * 8 + wi)
+                            elif bias_param[b, wi, 0] == BIAS_RAMP:
+                                err += lo_b * min(1.0, (t - bias_time[b, wi, 0]) / hi_b)
                             else:
                                 err += lo_b
                     # Gauss–Markov NLOS episodes
@@ -291,8 +293,11 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             if uniform_at(key_onset, 2 * idx) < p_on:
                                 u = uniform_at(key_onset, 2 * idx + 1)
                                 gm_left[b, i, l] = max(1.0, -g[1] * math.log(u) / w.dt)
-                                bb = g[2] + g[3] * normal_at(key_process, idx)
-                                gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
+                                if g[6] > 0.0:  # ramp onset: from zero bias, relaxing towards the mean
+                                    gm_bias[b, i, l] = 0.0
+                                else:
+                                    bb = g[2] + g[3] * normal_at(key_process, idx)
+                                    gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
                         else:
                             # b ← μ + φ(b − μ) + σ√(1−φ²)·n
                             bb = g[2] + phi * (gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, idx)

@@ -113,3 +113,38 @@ def test_v0_tasks_are_untouched_by_the_v1_fields():
             g = spec.faults.nlos_gauss_markov
             assert g is None or (g.onset_rate_range is None and g.mean_bias_range is None and g.link_fraction == 1.0)
             assert spec.scoring.nodes_from_schedule == "all"
+
+
+def test_nlos_step_v1_biases_ramp_in_over_five_seconds():
+    spec = get_spec("swarmloc/NLOSStep-v1")
+    world = World(spec, 1)
+    world.reset([4])
+    final = {0: 1.0, 2: 0.5, 4: 0.6}
+    for k in range(1, spec.n_steps + 1):
+        buf = world.sense()
+        t = k * spec.dt
+        inside = 20.0 <= t + 1e-9 and t < 30.0 - 1e-9
+        for anchor, bias in final.items():
+            want = bias * min(1.0, (t - 20.0) / 5.0) if inside else 0.0
+            assert np.allclose(buf.injected[0, :, anchor], want, atol=1e-12), (t, anchor)
+        assert not buf.injected[0, :, [1, 3, 5, 6, 7]].any()
+
+
+def test_ramp_onset_starts_an_nlos_episode_at_zero_bias():
+    # with onset="ramp" the first biased step of every NLOS episode is tiny; with "jump" it is drawn at full size
+    firsts = {}
+    for onset in ("ramp", "jump"):
+        spec = get_spec("swarmloc/NLOS-v1", duration=30.0, faults={"nlos_gauss_markov": {"onset": onset}})
+        world = World(spec, 4)
+        world.reset([1, 2, 3, 4])
+        before = np.zeros((4, spec.n_uav, spec.n_channels), dtype=bool)
+        first = []
+        for _ in range(spec.n_steps):
+            buf = world.sense()
+            biased = world.inputs.gm_left > 0
+            first += list(buf.injected[biased & ~before])
+            before = biased
+        firsts[onset] = np.array(first)
+    assert firsts["ramp"].size > 20 and firsts["jump"].size > 20
+    # the AR(1) step from 0: μ(1 − φ) + σ√(1 − φ²)·n with φ = exp(−0.1/2): a few centimetres, never metres
+    assert np.median(firsts["ramp"]) < 0.1 < np.median(firsts["jump"])
