@@ -222,7 +222,7 @@ def test_leaderboard_method_pages_link_their_explanation(tmp_path, monkeypatch):
     shipped.mkdir()
     for name in ("chi2-gate", "dead-reckoning"):
         shutil.copy(RESULTS_DIR / f"{name}.json", shipped / f"{name}.json")
-    monkeypatch.setattr(site_explain, "EXPLAIN_DURATION", 21.0)
+    monkeypatch.setattr(site_explain, "EXPLAIN_DURATION", 26.0)  # NLOSStep-v1: the biases ramp in over 20–25 s
     with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as store:
         assert load_shipped(store, shipped).stored == ("chi2-gate", "dead-reckoning")
         entries = {e.name: e for e in store.entries()}

@@ -1,4 +1,5 @@
-"""The committed standard-v0 results of the shipped methods load into a fresh store."""
+"""The committed standard-v1 and standard-v0 results of the shipped methods match their suites and load into a fresh
+store."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import pytest
 
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.suites import get_suite
-from swarmloc.leaderboard.shipped import load_shipped, shipped_results
+from swarmloc.leaderboard.shipped import RESULTS_DIRS, load_shipped, shipped_results
 from swarmloc.leaderboard.store import LeaderboardStore
 
 FILES = shipped_results()
@@ -17,12 +18,19 @@ def test_reference_methods_are_shipped():
     assert {"uniform", "oracle", "chi2-gate"} <= names
 
 
-@pytest.mark.parametrize("path", FILES, ids=[p.stem for p in FILES])
+@pytest.mark.parametrize("path", FILES, ids=[f"{p.parent.name}/{p.stem}" for p in FILES])
 def test_shipped_file_matches_the_current_suite(path):
     results = load_results(path)
-    suite = get_suite("standard-v0")
-    assert results.suite.sha256 == suite.sha256, "stale: regenerate with python -m swarmloc.leaderboard.shipped --regenerate"
+    suite_name = next(name for name, folder in RESULTS_DIRS.items() if folder == path.parent)
+    assert results.suite.name == suite_name
+    suite = get_suite(suite_name)
+    assert results.suite.sha256 == suite.sha256, \
+        f"stale: regenerate with python -m swarmloc.leaderboard.shipped --suite {suite_name} --regenerate"
     assert {(e.task, e.seed) for e in results.episodes} == set(suite.episodes)
+
+
+def test_both_suites_are_shipped():
+    assert {p.parent for p in FILES} == set(RESULTS_DIRS.values())
 
 
 def test_shipped_results_populate_a_fresh_store_once(tmp_path):
