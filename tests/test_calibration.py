@@ -297,7 +297,7 @@ def test_the_command_answers_help_and_refuses_bad_input(capsys, tmp_path):
 
 def test_the_committed_report_is_current_and_a_reduced_rerun_agrees(tmp_path):
     """docs/calibration.json was generated on today's standard-v1 (its hash covers the task specs, so a
-    changed task needs a new report), and re-running a few v1 tasks on 3 of the 32 seeds gives the same
+    changed task needs a new report), and re-running three v1 tasks on 3 of the 32 seeds gives the same
     verdicts on the criteria that 3 seeds can judge (the 32-seed values stay in the report)."""
     from pathlib import Path
 
@@ -308,10 +308,15 @@ def test_the_committed_report_is_current_and_a_reduced_rerun_agrees(tmp_path):
     assert committed["suite"]["sha256"] == suite.sha256, "docs/calibration.md is stale: swarmloc reproduce calibration"
     assert [t["task"] for t in committed["tasks"]] == suite.tasks
     assert all(t["n_seeds"] == 32 for t in committed["tasks"])
-    tasks = ["swarmloc/Ideal-v1", "swarmloc/NLOS-v1", "swarmloc/Scale2-v1", "swarmloc/Scale8-v1"]
-    raw = K.reproduce_calibration("standard-v1", ",".join(tasks), 3, tmp_path / "c.md", tmp_path / "c.json")
+    # criteria whose 32-seed value is far from its threshold (a verdict near one may flip on 3 seeds:
+    # Scale2-v1's uniform/bound is 1.90 against 2)
+    checks = {"swarmloc/Ideal-v1": ("ceiling", "not_degenerate", "phenomenon"),
+              "swarmloc/NLOS-v1": ("ceiling", "fault_matters", "not_degenerate"),
+              "swarmloc/CascadedFault-v1": ("ceiling", "fault_matters", "not_degenerate", "phenomenon")}
+    raw = K.reproduce_calibration("standard-v1", ",".join(checks), 3, tmp_path / "c.md", tmp_path / "c.json")
     by_task = {t["task"]: t for t in committed["tasks"]}
+    assert [t["task"] for t in raw["tasks"]] == list(checks)
     for t in raw["tasks"]:
-        for criterion in ("ceiling", "fault_matters", "not_degenerate", "phenomenon"):
+        for criterion in checks[t["task"]]:
             assert t["criteria"][criterion]["pass"] == by_task[t["task"]]["criteria"][criterion]["pass"], \
                 (t["task"], criterion)
