@@ -22,8 +22,10 @@ Two sources recur:
   appeared at full size in one step).
 * **Randomized scenarios** (``*Random-v1``): the scenario parameters are drawn per episode
   from the seed within documented ranges (``specs.NlosGaussMarkov`` ``*_range``,
-  ``specs.ImuCascadeRandom``); the ``*RandomShifted-v1`` task of a family draws outside the
-  training ranges (more biased links, a larger swarm, stronger faults) and is scored as the
+  ``specs.ImuCascadeRandom``, ``specs.HybridNoise.ratio_range``, ``specs.GpsDriftRandom``,
+  ``specs.VisionOutageRandom``); the ``*RandomShifted-v1`` task of a family draws outside the
+  training ranges (more biased links, a larger swarm, weaker and longer IMU faults, heavier
+  GPS tails, faster drifts, longer camera outages) and is scored as the
   shifted (out-of-distribution) split. Learned methods train on the ``*Random-v1`` tasks'
   training seeds only. The swarm size is fixed per task (the batch layout is ``(B, N, ...)``),
   so a larger N is a shifted task, not a per-episode draw.
