@@ -7,13 +7,16 @@ test seeds 1_000_000 + i, ``dev`` uses 2_000_000 + i.
 Training code must call :func:`check_training_seeds` on the seeds it draws; tuning may
 use dev seeds, never test seeds. Suites:
 
-* ``standard-v0`` — the leaderboard suite: the 17 tasks of v0 (:data:`STANDARD_V0_TASKS`,
-  frozen: a task added later joins in ``standard-v1``), 32 test seeds each
-  (1_000_000 … 1_000_031). Its SHA-256 is pinned in the tests.
-* ``quick`` — every simulated task in the catalogue, the first 4 test seeds (on the
-  ``standard-v0`` tasks a subset of its episodes); for demos and smoke tests.
-* ``dev`` — every simulated task in the catalogue, 8 dev seeds (2_000_000 … 2_000_007);
-  for tuning.
+* ``standard-v1`` — the leaderboard suite of benchmark v1: every simulated v1 task
+  (:data:`STANDARD_V1_TASKS`: the recalibrated families, the randomized ``*Random-v1`` tasks
+  and their ``*RandomShifted-v1`` shifted splits, TDOA-v1), 32 test seeds each. Its hash
+  covers the task specs as well as the episodes.
+* ``quick-v1`` / ``dev-v1`` — the same tasks, the first 4 test seeds (demos, smoke tests,
+  the default of ``swarmloc demo`` and ``swarmloc evaluate``) / 8 dev seeds (tuning).
+* ``standard-v0`` — the v0 leaderboard suite: the 17 tasks of v0 (:data:`STANDARD_V0_TASKS`,
+  frozen), 32 test seeds each (1_000_000 … 1_000_031). Its SHA-256 is pinned in the tests.
+* ``quick`` / ``dev`` — the v0 simulated tasks and TDOA-v1 (:data:`QUICK_V0_TASKS`, frozen),
+  the first 4 test seeds / 8 dev seeds (2_000_000 … 2_000_007).
 
 * ``real-v0`` — real flights replayed from imported data (:data:`REAL_V0_TASKS`: the UTIL
   Crazyflie flight ``UTILFlight-v0``), 4 test seeds each. Every seed replays the same
