@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from trust_helpers import trust_input as _input
+from trust_helpers import trust_layout as _layout
 
 from swarmloc.agents.classical import (
     Chi2GateTrust,
@@ -13,7 +15,7 @@ from swarmloc.agents.classical import (
     OracleTrust,
     RandomTrust,
 )
-from swarmloc.agents.protocols import PrivilegedInfo, TrustInput, episode_keys
+from swarmloc.agents.protocols import PrivilegedInfo, episode_keys
 from swarmloc.agents.registry import load_method
 from swarmloc.agents.smoothing import MarkovSmoothing, smooth_step
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
@@ -21,20 +23,6 @@ from swarmloc.envs.channels import ANCHOR, GPS, ChannelLayout
 from swarmloc.envs.tasks import get_spec
 
 SEEDS = list(range(1_000_000, 1_000_008))
-
-
-def _layout(kinds: list[int]) -> ChannelLayout:
-    kind = np.array([kinds])
-    return ChannelLayout(kind=kind, target=np.zeros_like(kind), linked=np.ones(kind.shape, bool),
-                         sigma=np.ones(kind.shape))
-
-
-def _input(nis: np.ndarray, valid: np.ndarray | None = None, step: int = 1) -> TrustInput:
-    shape = nis.shape
-    valid = np.ones(shape, dtype=bool) if valid is None else valid
-    zeros = np.zeros(shape)
-    return TrustInput.view(np.zeros((*shape, 11), np.float32), np.sqrt(nis), zeros, nis, np.ones(shape),
-                           np.zeros(shape[:2]), valid, 0.1 * step, step)
 
 
 # --------------------------------------------------------------------------- rules

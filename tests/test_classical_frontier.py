@@ -4,32 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from trust_helpers import trust_input as _input
+from trust_helpers import trust_layout as _layout
 
 from swarmloc.agents.integrity import CusumTrust, RaimTrust, admissible, cusum_step
-from swarmloc.agents.protocols import TrustInput, episode_keys
+from swarmloc.agents.protocols import episode_keys
 from swarmloc.agents.registry import REGISTRY, LoadedMethod, load_method
 from swarmloc.agents.trust_estimator import TrustEstimator
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
 from swarmloc.bench.speed.world import UnfusedCore
-from swarmloc.envs.channels import ANCHOR, LANDMARK, PEER, PEER_REL, ChannelLayout
+from swarmloc.envs.channels import ANCHOR, LANDMARK, PEER, PEER_REL
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.tasks import get_spec
 
 SEEDS = list(range(1_000_000, 1_000_012))
-
-
-def _layout(kinds: list[int]) -> ChannelLayout:
-    kind = np.array([kinds])
-    return ChannelLayout(kind=kind, target=np.zeros_like(kind), linked=np.ones(kind.shape, bool),
-                         sigma=np.ones(kind.shape))
-
-
-def _input(nis: np.ndarray, valid: np.ndarray | None = None, step: int = 1) -> TrustInput:
-    shape = nis.shape
-    valid = np.ones(shape, dtype=bool) if valid is None else valid
-    zeros = np.zeros(shape)
-    return TrustInput.view(np.zeros((*shape, 11), np.float32), np.sqrt(nis), zeros, nis, np.ones(shape),
-                           np.zeros(shape[:2]), valid, 0.1 * step, step)
 
 
 # --------------------------------------------------------------------------- CUSUM
