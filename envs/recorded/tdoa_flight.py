@@ -52,6 +52,7 @@ from .util_flight import (
     Recording,
     _read_only,
     ahrs_attitude,
+    episode_times,
     read_anchors,
     read_tables,
     step_means,
@@ -215,12 +216,7 @@ def load_tdoa_recording(folder: Path, log: str, start: float, n_steps: int, dt: 
     ids = data.tdoa[:, 1:3].astype(int)
     if ids.max() >= n_a or pair_arr.max() >= n_a:
         raise ValueError(f"flight {log!r} or the task names anchors beyond the {n_a} of {anchors_file}")
-    t = start + dt * np.arange(n_steps + 1)
-    lo = max(data.imu[0, 0], data.mocap[0, 0]) + dt
-    hi = min(data.imu[-1, 0], data.mocap[-1, 0])
-    if t[0] < lo or t[-1] > hi:
-        raise ValueError(f"episode window [{t[0]:.3f}, {t[-1]:.3f}] s does not fit in flight {log!r}, whose IMU "
-                         f"and mocap cover [{lo:.3f}, {hi:.3f}] s")
+    t = episode_times(data.imu, data.mocap, start, dt, n_steps, f"flight {log!r}")
 
     # ---- truth (the tag) and IMU input
     pos = tag_positions(data.mocap, t)

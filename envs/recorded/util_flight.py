@@ -267,6 +267,23 @@ def step_means(t_samples: np.ndarray, values: np.ndarray, t_steps: np.ndarray, d
     return out
 
 
+def episode_times(imu: np.ndarray, mocap: np.ndarray, start: float, dt: float, n_steps: int,
+                  flight: str) -> np.ndarray:
+    """The ``n_steps + 1`` step times of an episode from log time ``start``, checked to lie where IMU and mocap
+    both cover (one step after their first sample, for the first IMU interval).
+
+    Raises:
+        ValueError: the window does not fit in ``flight`` (named in the message).
+    """
+    t = start + dt * np.arange(n_steps + 1)
+    lo = max(imu[0, 0], mocap[0, 0]) + dt
+    hi = min(imu[-1, 0], mocap[-1, 0])
+    if t[0] < lo or t[-1] > hi:
+        raise ValueError(f"episode window [{t[0]:.3f}, {t[-1]:.3f}] s does not fit in {flight}, whose IMU and "
+                         f"mocap cover [{lo:.3f}, {hi:.3f}] s; shorten the duration or move the start")
+    return t
+
+
 def airborne_window(mocap: np.ndarray, margin: float = TAKEOFF_MARGIN) -> tuple[float, float]:
     """Take-off and landing times from the truth altitude.
 
@@ -312,12 +329,7 @@ def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float
     """
     anchors = read_anchors(folder, anchors_file)
     data = read_flight_log(_log_dir(folder, log))
-    t = start + dt * np.arange(n_steps + 1)
-    lo = max(data.imu[0, 0], data.mocap[0, 0]) + dt
-    hi = min(data.imu[-1, 0], data.mocap[-1, 0])
-    if t[0] < lo or t[-1] > hi:
-        raise ValueError(f"episode window [{t[0]:.3f}, {t[-1]:.3f}] s does not fit in log {log!r}, whose IMU and "
-                         f"mocap cover [{lo:.3f}, {hi:.3f}] s; shorten the duration or move the start")
+    t = episode_times(data.imu, data.mocap, start, dt, n_steps, f"log {log!r}")
     ids = data.uwb[:, 1].astype(int)
     if (ids < 0).any() or (ids >= len(anchors)).any():
         raise ValueError(f"log {log!r} has ranges of anchor ids {sorted(set(ids.tolist()))}; "
@@ -392,6 +404,7 @@ __all__ = [
     "ahrs_attitude",
     "airborne_window",
     "calibrate_range_bias",
+    "episode_times",
     "interpolate_positions",
     "load_recording",
     "range_residuals",
