@@ -26,16 +26,13 @@ importing a raw log reproduces the staged CSVs byte for byte (checked by the tes
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .cfusdlog import UsdLog, read_usd_log
-from .util_import import DATA_ENV_VAR, Table, _write_gzip_text, data_root
+from .util_import import DATA_ENV_VAR, Table, data_root, install_folder
 
 __all__ = [
     "DATASET_DIR",
@@ -225,22 +222,8 @@ def import_util_tdoa(raw_log: str | Path, out_dir: str | Path, flight: str, *, s
         if ids.max() >= len(anchors):
             raise TdoaImportError(f"the log names anchor {int(ids.max())}; the survey has 0..{len(anchors) - 1}")
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{flight}.", suffix=".importing", dir=out_dir))
-    try:
-        (staging / flight).mkdir()
-        for table in tables:
-            _write_gzip_text(staging / flight / table.file_name, table.to_text())
-        replaced = None
-        if target.exists():
-            replaced = staging / "replaced"
-            os.rename(target, replaced)
-        os.rename(staging / flight, target)
-        if anchors is not None:
-            (staging / "anchors.csv").write_text(anchor_table_text(anchors), encoding="ascii")
-            os.replace(staging / "anchors.csv", out_dir / f"anchors_{constellation}.csv")
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    files = {} if anchors is None else {f"anchors_{constellation}.csv": anchor_table_text(anchors)}
+    install_folder(out_dir, flight, tables, files, overwrite)
     counts = {f"{flight}/{table.file_name}": table.n_rows for table in tables}
     if anchors is not None:
         counts[f"anchors_{constellation}.csv"] = len(anchors)

@@ -317,13 +317,31 @@ def import_util(
         f"{i},{x:.4f},{y:.4f},{z:.4f}\n" for i, (x, y, z) in enumerate(anchors.tolist())
     )
 
+    install_folder(out_dir, log_name, tables, {"anchors.csv": anchor_text}, overwrite)
+    counts = {f"{log_name}/{table.file_name}": table.n_rows for table in tables}
+    counts["anchors.csv"] = len(anchors)
+    return counts
+
+
+def install_folder(out_dir: Path, name: str, tables: list[Table], files: dict[str, str], overwrite: bool) -> None:
+    """Write ``tables`` (gzip) as the folder ``out_dir/name`` and ``files`` (ASCII text) beside it, atomically.
+
+    Everything is written into a staging folder inside ``out_dir`` first and renamed into
+    place, so a failed import leaves no half-written folder; an existing folder is replaced
+    only with ``overwrite`` and put back if the rename fails.
+
+    Raises:
+        FileExistsError: ``out_dir/name`` appeared during the import and ``overwrite`` is false.
+    """
+    target = out_dir / name
     out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{log_name}.", suffix=".importing", dir=out_dir))
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".importing", dir=out_dir))
     try:
-        (staging / log_name).mkdir()
+        (staging / name).mkdir()
         for table in tables:
-            _write_gzip_text(staging / log_name / table.file_name, table.to_text())
-        (staging / "anchors.csv").write_text(anchor_text, encoding="ascii")
+            _write_gzip_text(staging / name / table.file_name, table.to_text())
+        for file_name, text in files.items():
+            (staging / file_name).write_text(text, encoding="ascii")
         replaced = None
         if target.exists():
             if not overwrite:
@@ -331,18 +349,15 @@ def import_util(
             replaced = staging / "replaced"
             os.rename(target, replaced)
         try:
-            os.rename(staging / log_name, target)
+            os.rename(staging / name, target)
         except BaseException:
             if replaced is not None:  # put the previous import back
                 os.rename(replaced, target)
             raise
-        os.replace(staging / "anchors.csv", out_dir / "anchors.csv")
+        for file_name in files:
+            os.replace(staging / file_name, out_dir / file_name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-
-    counts = {f"{log_name}/{table.file_name}": table.n_rows for table in tables}
-    counts["anchors.csv"] = len(anchors)
-    return counts
 
 
 def _write_gzip_text(path: Path, text: str) -> None:
