@@ -36,6 +36,21 @@ EVAL_TASKS: dict[str, str] = {
     "swarmloc/Ideal-v0": "rmse",
 }
 
+#: the same for a run on v1 tasks (the randomized families' in-distribution tasks)
+EVAL_TASKS_V1: dict[str, str] = {
+    "swarmloc/CascadedFaultRandom-v1": "healthy_rmse",
+    "swarmloc/NLOSRandom-v1": "rmse",
+    "swarmloc/ScaleRandom-v1": "rmse",
+    "swarmloc/HybridNoiseRandom-v1": "rmse",
+}
+
+
+def eval_tasks(training_tasks) -> dict[str, str]:
+    """The dev-evaluation tasks of a run: v1's when every training task is a v1 task, else v0's."""
+    from swarmloc.envs.tasks import get_spec
+
+    return EVAL_TASKS_V1 if all(get_spec(t).version >= 1 for t in training_tasks) else EVAL_TASKS
+
 
 @dataclass
 class TrainMappoArgs(MappoConfig):
@@ -60,8 +75,8 @@ TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/ma
                  "bench/training/mappo.py")
 
 
-def dev_evaluator(n_seeds: int):
-    """An ``evaluate(policy)`` callback: smoothed policy on ``n_seeds`` dev seeds of ``EVAL_TASKS``.
+def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS):
+    """An ``evaluate(policy)`` callback: smoothed policy on ``n_seeds`` dev seeds of ``tasks`` (task → metric).
 
     Returns a function mapping an unsmoothed ``MappoPolicy`` to
     ``{"<Task>/<metric>": value, "<Task>/<metric>_vs_uniform": ratio}`` (means over seeds).
@@ -79,7 +94,7 @@ def dev_evaluator(n_seeds: int):
         loaded = LoadedMethod(name="mappo", entry_point="swarmloc.agents.mappo_policy:mappo", track="A",
                               privileged=False, deterministic=True, method=method)
         out: dict[str, float] = {}
-        for task, metric in EVAL_TASKS.items():
+        for task, metric in tasks.items():
             spec = get_spec(task)
             name = task.removeprefix("swarmloc/")
             values = [m[metric] for m in rollout(loaded, spec, seeds)[0]]
@@ -111,7 +126,7 @@ def train_mappo(config: TrainMappoArgs) -> Path:
     from swarmloc.agents.mappo import train
 
     check_training_seeds([config.seed])
-    evaluate = dev_evaluator(config.eval_seeds) if config.eval_seeds > 0 else None
+    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks)) if config.eval_seeds > 0 else None
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
