@@ -138,3 +138,39 @@ class MappoConfig:
         if self.accuracy_only:
             extra.update(delay=0.0, energy=0.0, jitter=0.0)
         return RewardWeights(**extra)
+
+
+#: the v1 randomized families (their in-distribution tasks; training seeds only)
+V1_RANDOM_TASKS: tuple[str, ...] = (
+    "NLOSRandom-v1", "ScaleRandom-v1", "CascadedFaultRandom-v1", "HybridNoiseRandom-v1", "GradualFaultRandom-v1",
+    "VisionLossRandom-v1",
+)
+
+
+@dataclass
+class SetGruConfig(MappoConfig):
+    """Hyper-parameters of a ``mappo-set-gru`` run (``MappoConfig``'s, with these changes)."""
+
+    tasks: tuple[str, ...] = V1_RANDOM_TASKS
+    """training tasks (registered IDs); one collector each, cycled per batch"""
+    frames: int = 3_000_000
+    """total environment frames"""
+    minibatches: int = 4
+    """minibatches per epoch, each ``num_envs / minibatches`` whole rollouts (sequences)"""
+    learning_rate: float = 1e-3
+    """Adam learning rate (linearly annealed to 0)"""
+    embed: int = 64
+    """E, the channel embedding width"""
+    gru_hidden: int = 64
+    """H, the per-channel GRU state width"""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.num_envs % self.minibatches:
+            raise ValueError(f"num_envs={self.num_envs} must be divisible by minibatches={self.minibatches} "
+                             "(a minibatch is whole rollouts)")
+        if self.collectors:
+            raise ValueError(f"collectors={self.collectors}: the recurrent actor's state lives in this process; "
+                             "use collectors=0")
+        if self.embed < 1 or self.gru_hidden < 1:
+            raise ValueError(f"embed and gru_hidden must be >= 1, got {self.embed}, {self.gru_hidden}")

@@ -105,6 +105,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
     MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A", False, True,
                 "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
+    MethodEntry("mappo-set-gru", "swarmloc.agents.set_gru_policy:mappo_set_gru", "A", False, True,
+                "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True,
                 "privileged: α_min on faults labelled v1 (the trust ceiling)"),
     MethodEntry("oracle-v0", f"{_A}:oracle_v0_policy", "A", True, True,

@@ -48,6 +48,7 @@ COMMANDS: CommandTable = {
     },
     "train": {
         "mappo": "swarmloc.bench.cli.train_mappo",
+        "mappo-set-gru": "swarmloc.bench.cli.train_set_gru",
         "pfnn": "swarmloc.bench.cli.train_pfnn",
     },
     "reproduce": {

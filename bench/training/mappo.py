@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.mappo_config import MappoConfig
+from swarmloc.agents.mappo_config import MappoConfig, SetGruConfig
 from swarmloc.bench.common.files import atomic_path, write_text_atomic
 from swarmloc.bench.common.provenance import source_commit
 from swarmloc.envs.seeds import DEV_SEED_START, check_training_seeds
@@ -62,6 +62,16 @@ class TrainMappoArgs(MappoConfig):
     """dev seeds per evaluation task (0 = no periodic evaluation)"""
 
 
+@dataclass
+class TrainSetGruArgs(SetGruConfig):
+    """Train the set + GRU link-trust actor with recurrent MAPPO (training seeds only; dev-seed evaluation)."""
+
+    weights_out: str = ""
+    """write the trained actor's state_dict here (+ ``.json`` provenance); default ``<run_dir>/mappo_set_gru.pt``"""
+    eval_seeds: int = 4
+    """dev seeds per evaluation task (0 = no periodic evaluation)"""
+
+
 def command_line() -> str:
     """The command that is running, as a user would type it."""
     prog = Path(sys.argv[0]).name
@@ -71,11 +81,12 @@ def command_line() -> str:
 
 
 #: the code a MAPPO training run depends on (its provenance is "dirty" if any of it changed)
-TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/mappo_nets.py", "agents/mappo_policy.py", "agents/smoothing.py",
+TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/mappo_nets.py", "agents/mappo_policy.py",
+                 "agents/mappo_collect.py", "agents/mappo_set_gru.py", "agents/set_gru_policy.py", "agents/smoothing.py",
                  "bench/training/mappo.py")
 
 
-def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS):
+def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name: str = "mappo"):
     """An ``evaluate(policy)`` callback: smoothed policy on ``n_seeds`` dev seeds of ``tasks`` (task → metric).
 
     Returns a function mapping an unsmoothed ``MappoPolicy`` to
@@ -91,7 +102,7 @@ def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS):
 
     def evaluate(policy) -> dict[str, float]:
         method = MarkovSmoothing(policy, BETA_MAX, SMOOTHING_GAMMA)
-        loaded = LoadedMethod(name="mappo", entry_point="swarmloc.agents.mappo_policy:mappo", track="A",
+        loaded = LoadedMethod(name=method_name, entry_point="(training snapshot)", track="A",
                               privileged=False, deterministic=True, method=method)
         out: dict[str, float] = {}
         for task, metric in tasks.items():
@@ -109,33 +120,41 @@ def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS):
     return evaluate
 
 
-def train_mappo(config: TrainMappoArgs) -> Path:
+def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
     """Train MAPPO link trust and write the weights and their provenance record.
 
     Args:
-        config: a ``TrainMappoArgs`` (``MappoConfig`` plus ``weights_out``, ``eval_seeds``).
+        config: a ``TrainMappoArgs`` (the paper's per-channel actor) or a ``TrainSetGruArgs``
+            (the set + GRU actor), each with ``weights_out`` and ``eval_seeds``.
 
     Returns:
-        The path of the written weights (a plain ``ChannelActor`` state_dict).
+        The path of the written weights (a plain ``ChannelActor`` or ``SetGruActor`` state_dict).
 
     Raises:
         ValueError: the run's seed or any episode seed is not a training seed.
     """
     import torch
 
-    from swarmloc.agents.mappo import train
+    if isinstance(config, SetGruConfig):
+        from swarmloc.agents.mappo_set_gru import train
 
+        method, default_name = "mappo-set-gru", "mappo_set_gru.pt"
+    else:
+        from swarmloc.agents.mappo import train
+
+        method = "mappo-accuracy-only" if config.accuracy_only else "mappo"
+        default_name = "mappo.pt"
     check_training_seeds([config.seed])
-    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks)) if config.eval_seeds > 0 else None
+    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method) if config.eval_seeds > 0 else None
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
-    out = Path(config.weights_out) if config.weights_out else Path(config.run_dir) / "mappo.pt"
+    out = Path(config.weights_out) if config.weights_out else Path(config.run_dir) / default_name
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:
         torch.save(result.actor_state, tmp)
     record = {
-        "method": "mappo-accuracy-only" if config.accuracy_only else "mappo",
+        "method": method,
         "command": command_line(),
         "frames": result.frames,
         "iterations": result.iterations,
