@@ -163,6 +163,10 @@ class SetGruConfig(MappoConfig):
     """E, the channel embedding width"""
     gru_hidden: int = 64
     """H, the per-channel GRU state width"""
+    label_coef: float = 1.0
+    """weight of the privileged auxiliary loss: the actor's logit is also fitted (binary cross-entropy) to
+    "healthy" = not fault-labelled (labels v1 of the collected measurements; training only, as the
+    privileged critic's position error). 0: pure MAPPO"""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -172,5 +176,7 @@ class SetGruConfig(MappoConfig):
         if self.collectors:
             raise ValueError(f"collectors={self.collectors}: the recurrent actor's state lives in this process; "
                              "use collectors=0")
+        if self.label_coef < 0:
+            raise ValueError(f"label_coef must be >= 0, got {self.label_coef}")
         if self.embed < 1 or self.gru_hidden < 1:
             raise ValueError(f"embed and gru_hidden must be >= 1, got {self.embed}, {self.gru_hidden}")

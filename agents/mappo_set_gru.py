@@ -13,7 +13,14 @@ because the actor is recurrent, how the PPO update replays it:
   log-probabilities are the collected ones at the first epoch (ratio 1) and the gradient
   flows through time (truncated BPTT over T = ``rollout_steps``).
 * **Loss**: the clipped PPO surrogate per channel with its UAV's advantage (GAE on the
-  per-UAV standard reward), the entropy bonus, the value loss of the centralized critic.
+  per-UAV standard reward), the entropy bonus, the value loss of the centralized critic,
+  and a **privileged auxiliary loss** (``label_coef``): the binary cross-entropy of the
+  actor's logit against "healthy", i.e. not fault-labelled (labels v1 of the collected
+  measurements, read from the env in this process). Like the critic's position error, the
+  labels exist only while training; the actor never sees them. Without it (``label_coef
+  0``) both this actor and the paper's collapse to α ≈ 1 on the v1 families within 0.4–0.8 M
+  frames: isolating a link pays off only near α → 0, far from where exploration starts,
+  while "trust more" pays at once from α = 0.5.
 
 Everything else is ``mappo``'s: the training mixture (here the v1 randomized families'
 training seeds), the centralized privileged critic (``SwarmCritic``), held exploration
@@ -80,8 +87,35 @@ class RecurrentParams(nn.Module):
         return loc, self.actor.log_std.exp().detach().expand_as(loc), obs[..., VALID] > 0.5
 
 
-def build_policy(actor: SetGruActor, cfg: SetGruConfig) -> tuple[nn.Module, RecurrentParams]:
-    """The acting policy (recurrent μ, held noise, sample, sigmoid, in-loop smoother) and its recurrent module."""
+class PendingLabels(nn.Module):
+    """Training only: the fault labels v1 of the measurements the policy is deciding, read from the env.
+
+    The collectors run in this process, so the env of the batch's task is at hand
+    (``select``); its pending labels are those of the observation the policy sees. They go
+    into the batch as ``("uav", "fault_label")`` for the auxiliary loss and never into the actor.
+    """
+
+    def __init__(self, envs: list) -> None:
+        super().__init__()
+        self.envs = envs
+        self._key = 0
+
+    def select(self, key: int) -> None:
+        self._key = key
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        if self._key >= len(self.envs):  # a collector's probe call while it is being built
+            return torch.zeros(obs.shape[:-1], dtype=torch.bool)
+        labels = self.envs[self._key].batch.pending_labels_v1()
+        if labels.shape != obs.shape[:-1]:
+            raise RuntimeError(f"labels {labels.shape} do not match the observation {tuple(obs.shape[:-1])}")
+        return torch.from_numpy(np.array(labels, dtype=bool))
+
+
+def build_policy(actor: SetGruActor, cfg: SetGruConfig,
+                 labels: PendingLabels | None = None) -> tuple[nn.Module, RecurrentParams]:
+    """The acting policy (recurrent μ, held noise, sample, sigmoid, in-loop smoother) and its recurrent module;
+    with ``labels``, it also records the pending fault labels (training only)."""
     from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
     from torchrl.envs.utils import ExplorationType
 
@@ -99,6 +133,8 @@ def build_policy(actor: SetGruActor, cfg: SetGruConfig) -> tuple[nn.Module, Recu
     if smoother is not None:
         acting.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
                                        out_keys=[(G, "action")]))
+    if labels is not None:
+        acting.append(TensorDictModule(labels, in_keys=[(G, "observation")], out_keys=[(G, "fault_label")]))
     return TensorDictSequential(*acting), recurrent
 
 
@@ -137,7 +173,9 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
 
     # ---- actor, acting policy, critic
     actor = SetGruActor(N_FEATURES, cfg.embed, cfg.gru_hidden, cfg.init_trust, cfg.init_log_std)
-    policy, recurrent = build_policy(actor, cfg)
+    envs: list = []  # filled below, once the collectors have built their envs
+    labels = PendingLabels(envs) if cfg.label_coef > 0 else None
+    policy, recurrent = build_policy(actor, cfg, labels)
     critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
     critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,
                               out_keys=[(G, "state_value")])
@@ -148,6 +186,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                   for task in cfg.tasks]
     collection = Collection(cfg.tasks, cfg.num_envs, cfg.rollout_steps, cfg.seed, policy, env_kwargs,
                             check_seeds=check_seeds, threads=cfg.threads)
+    envs.extend(collection.envs)
     probe_x, probe_channels = probe_features()
     running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
@@ -165,6 +204,8 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
         task = cfg.tasks[t]
         schedule = collection.schedules[t]
         recurrent.select(t, fresh=schedule.steps_done % schedule.plan.n_steps == 0)
+        if labels is not None:
+            labels.select(t)
         tic = time.perf_counter()
         batch = collection.collect(t)  # (B, T)
         t_collect = time.perf_counter() - tic
@@ -219,6 +260,13 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                 value = critic(mb.select(*critic.in_keys).clone())[G, "state_value"]
                 loss_critic = (value - mb[G, "value_target"]).pow(2).mean()
                 total = loss_objective + cfg.critic_coef * loss_critic - cfg.entropy_coef * entropy
+                if labels is not None:
+                    # privileged auxiliary loss: logit → "healthy" (not fault-labelled), present channels only
+                    healthy = (~mb[G, "fault_label"]).float()
+                    bce = nn.functional.binary_cross_entropy_with_logits(loc, healthy, reduction="none")
+                    loss_label = (bce * valid).sum() / n_valid
+                    total = total + cfg.label_coef * loss_label
+                    stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
                 total.backward()
                 torch.nn.utils.clip_grad_norm_([*actor.parameters(), *critic.parameters()], cfg.max_grad_norm)
