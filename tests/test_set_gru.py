@@ -178,3 +178,32 @@ def test_training_is_deterministic_given_a_seed(tmp_path):
     a, b, c = (train(cfg(i, s)).actor_state for i, s in enumerate((5, 5, 6)))
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert any(not torch.equal(a[k], c[k]) for k in a)
+
+
+def test_training_batches_carry_the_pending_fault_labels_of_what_the_policy_saw():
+    """The auxiliary loss's labels: on NLOSStep-v1 (anchors 0, 2, 4 biased from 20 s, ramping over 5 s) no anchor
+    channel is labelled before the window and, inside it, only those anchors' are. (Labels v1 of Track A also
+    mark peer links whose neighbour's broadcast estimate is off: the swarm's first steps, and inside the window.)"""
+    from swarmloc.agents.mappo_collect import Collection
+    from swarmloc.agents.mappo_config import SetGruConfig
+    from swarmloc.agents.mappo_set_gru import PendingLabels, build_policy
+    from swarmloc.envs.channels import ANCHOR, build_layout
+    from swarmloc.envs.tasks import get_spec
+
+    cfg = SetGruConfig(tasks=("NLOSStep-v1",), num_envs=2, minibatches=2, frames=400, run_dir="unused")
+    envs: list = []
+    labels = PendingLabels(envs)
+    policy, recurrent = build_policy(_actor(), cfg, labels)
+    collection = Collection(cfg.tasks, 2, 100, 1, policy, [{}])
+    envs.extend(collection.envs)
+    layout = build_layout(get_spec("swarmloc/NLOSStep-v1"))
+    anchor = layout.kind == ANCHOR
+    biased = anchor & np.isin(layout.target, [0, 2, 4])
+    seen = []
+    for k in range(3):  # steps 1-100, 101-200, 201-300 (dt 0.1 s)
+        recurrent.select(0, fresh=k == 0)
+        batch = collection.collect(0)
+        seen.append(batch[("uav", "fault_label")].numpy())  # (B, T, N, L)
+    collection.shutdown()
+    assert not seen[0][..., anchor].any() and not seen[1][:, :-1][..., anchor].any()
+    assert seen[2][..., biased].any() and not seen[2][..., anchor & ~biased].any()
