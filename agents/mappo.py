@@ -51,7 +51,7 @@ from swarmloc.envs.tasks import get_spec
 
 from .mappo_collect import Collection, EpisodeSeeds  # noqa: F401  (EpisodeSeeds re-exported)
 from .mappo_config import DEFAULT_TASKS, MappoConfig  # noqa: F401  (re-exported)
-from .mappo_nets import G, build_modules
+from .mappo_nets import G, PendingLabels, build_modules
 from .mappo_policy import MappoPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
@@ -139,7 +139,9 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     writer = writer or SummaryWriter(str(run_dir))
     writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
-    actor_net, prob_actor, policy, critic, _, _ = build_modules(cfg)  # noise, smoother: found by Collection
+    envs: list = []  # the collectors' envs, for the privileged labels (filled once they are built)
+    labels = PendingLabels(envs) if cfg.label_coef > 0 else None
+    actor_net, prob_actor, policy, critic, _, _ = build_modules(cfg, labels)  # noise, smoother: found by Collection
     flops_per_channel = count_flops_per_channel(actor_net) + SMOOTHING_FLOPS_PER_CHANNEL
 
     # ---- one batched env + collector per task (here, or N workers each); training seeds only
@@ -148,6 +150,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     collection = Collection(cfg.tasks, cfg.num_envs, cfg.rollout_steps, cfg.seed, policy, env_kwargs,
                             collectors=cfg.collectors, backend=cfg.backend, address=cfg.address,
                             check_seeds=check_seeds, threads=cfg.threads)
+    envs.extend(collection.envs)
     probe_x, probe_channels = probe_features()
     running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
@@ -173,6 +176,8 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     for it in range(n_iters):
         t = it % len(cfg.tasks)
         task = cfg.tasks[t]
+        if labels is not None:
+            labels.select(t)
         tic = time.perf_counter()
         batch = collection.collect(t)  # (B, T): next seeds, noise block and smoother state set first
         t_collect = time.perf_counter() - tic
@@ -214,6 +219,15 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                 mb = replay.sample()
                 out = loss(mb)
                 total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+                if labels is not None:
+                    # privileged auxiliary loss (``label_coef``): logit → "healthy", present channels only
+                    obs = mb[G, "observation"]
+                    valid = obs[..., VALID]
+                    bce = torch.nn.functional.binary_cross_entropy_with_logits(
+                        actor_net(obs), (~mb[G, "fault_label"]).float(), reduction="none")
+                    loss_label = (bce * valid).sum() / valid.sum().clamp(min=1)
+                    total = total + cfg.label_coef * loss_label
+                    stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
                 total.backward()
                 torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg.max_grad_norm)

@@ -98,6 +98,10 @@ class MappoConfig:
     cluster of ``collectors`` CPUs)"""
     progress: bool = True
     """show a tqdm progress bar"""
+    label_coef: float = 0.0
+    """weight of a privileged auxiliary loss: the actor's logit is also fitted (binary cross-entropy) to
+    "healthy" = not fault-labelled (labels v1 of the collected measurements; training only, as the
+    privileged critic's position error; needs collectors=0). 0: the paper's MAPPO"""
     reward_weights: dict = field(default_factory=dict)
     """extra ``RewardWeights`` overrides (advanced; ``accuracy_only`` sets delay/energy/jitter to 0)"""
 
@@ -111,6 +115,9 @@ class MappoConfig:
             raise ValueError(f"collectors must be 0 or a divisor of num_envs={self.num_envs}, got {self.collectors!r}")
         if self.backend not in ("process", "ray"):
             raise ValueError(f"backend must be 'process' or 'ray', got {self.backend!r}")
+        if self.label_coef < 0 or (self.label_coef > 0 and self.collectors):
+            raise ValueError(f"label_coef={self.label_coef} must be >= 0, and 0 with collectors >= 1 (the labels are "
+                             "read from the env in this process)")
         if self.address is not None and (self.backend != "ray" or not self.collectors):
             raise ValueError(f"address={self.address!r} names a Ray cluster; it needs collectors >= 1 and backend ray")
         if not 0 <= self.seed < TRAINING_SEED_LIMIT:
@@ -164,9 +171,7 @@ class SetGruConfig(MappoConfig):
     gru_hidden: int = 64
     """H, the per-channel GRU state width"""
     label_coef: float = 1.0
-    """weight of the privileged auxiliary loss: the actor's logit is also fitted (binary cross-entropy) to
-    "healthy" = not fault-labelled (labels v1 of the collected measurements; training only, as the
-    privileged critic's position error). 0: pure MAPPO"""
+    """weight of the privileged auxiliary loss (see ``MappoConfig.label_coef``)"""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -176,7 +181,5 @@ class SetGruConfig(MappoConfig):
         if self.collectors:
             raise ValueError(f"collectors={self.collectors}: the recurrent actor's state lives in this process; "
                              "use collectors=0")
-        if self.label_coef < 0:
-            raise ValueError(f"label_coef must be >= 0, got {self.label_coef}")
         if self.embed < 1 or self.gru_hidden < 1:
             raise ValueError(f"embed and gru_hidden must be >= 1, got {self.embed}, {self.gru_hidden}")

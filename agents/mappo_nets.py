@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -197,6 +198,31 @@ class LoopSmoother(nn.Module):
         return alpha
 
 
+class PendingLabels(nn.Module):
+    """Training only: the fault labels v1 of the measurements the policy is deciding, read from the env.
+
+    The collectors run in this process, so the env of the batch's task is at hand
+    (``select``); its pending labels are those of the observation the policy sees. They go
+    into the batch as ``("uav", "fault_label")`` for the auxiliary loss and never into the actor.
+    """
+
+    def __init__(self, envs: list) -> None:
+        super().__init__()
+        self.envs = envs
+        self._key = 0
+
+    def select(self, key: int) -> None:
+        self._key = key
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        if self._key >= len(self.envs):  # a collector's probe call while it is being built
+            return torch.zeros(obs.shape[:-1], dtype=torch.bool)
+        labels = self.envs[self._key].batch.pending_labels_v1()
+        if labels.shape != obs.shape[:-1]:
+            raise RuntimeError(f"labels {labels.shape} do not match the observation {tuple(obs.shape[:-1])}")
+        return torch.from_numpy(np.array(labels, dtype=bool))
+
+
 class _ActorParams(nn.Module):
     """``ChannelActor`` → (μ, σ, valid) per channel, the inputs of ``MaskedNormal``."""
 
@@ -214,8 +240,9 @@ def _logit_to_trust(logit: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return torch.where(valid, torch.sigmoid(logit), torch.ones_like(logit))
 
 
-def build_modules(cfg: "MappoConfig") -> tuple:
-    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module.
+def build_modules(cfg: "MappoConfig", labels: PendingLabels | None = None) -> tuple:
+    """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module
+    (with ``labels``, the acting policy also records the pending fault labels: training only).
 
     Returns:
         ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise,
@@ -247,6 +274,8 @@ def build_modules(cfg: "MappoConfig") -> tuple:
     if smoother is not None:
         acting.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
                                        out_keys=[(G, "action")]))
+    if labels is not None:
+        acting.append(TensorDictModule(labels, in_keys=[(G, "observation")], out_keys=[(G, "fault_label")]))
     policy = TensorDictSequential(*acting)
     critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
     critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,

@@ -50,7 +50,8 @@ from swarmloc.envs.tasks import get_spec
 from .mappo import REWARD_TERMS, TrainResult, _team_returns, probe_features
 from .mappo_collect import Collection
 from .mappo_config import SetGruConfig, V1_RANDOM_TASKS  # noqa: F401  (re-exported)
-from .mappo_nets import G, HeldNoise, HeldNoiseNormal, LoopSmoother, MaskedNormal, SwarmCritic, _logit_to_trust
+from .mappo_nets import (G, HeldNoise, HeldNoiseNormal, LoopSmoother, MaskedNormal, PendingLabels, SwarmCritic,
+                         _logit_to_trust)
 from .set_gru_policy import SetGruActor, SetGruPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
 
@@ -85,31 +86,6 @@ class RecurrentParams(nn.Module):
             loc, h = self.actor.step(obs, h)
         self._states[self._key] = h
         return loc, self.actor.log_std.exp().detach().expand_as(loc), obs[..., VALID] > 0.5
-
-
-class PendingLabels(nn.Module):
-    """Training only: the fault labels v1 of the measurements the policy is deciding, read from the env.
-
-    The collectors run in this process, so the env of the batch's task is at hand
-    (``select``); its pending labels are those of the observation the policy sees. They go
-    into the batch as ``("uav", "fault_label")`` for the auxiliary loss and never into the actor.
-    """
-
-    def __init__(self, envs: list) -> None:
-        super().__init__()
-        self.envs = envs
-        self._key = 0
-
-    def select(self, key: int) -> None:
-        self._key = key
-
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        if self._key >= len(self.envs):  # a collector's probe call while it is being built
-            return torch.zeros(obs.shape[:-1], dtype=torch.bool)
-        labels = self.envs[self._key].batch.pending_labels_v1()
-        if labels.shape != obs.shape[:-1]:
-            raise RuntimeError(f"labels {labels.shape} do not match the observation {tuple(obs.shape[:-1])}")
-        return torch.from_numpy(np.array(labels, dtype=bool))
 
 
 def build_policy(actor: SetGruActor, cfg: SetGruConfig,

@@ -139,6 +139,8 @@ def test_config_refuses_what_recurrent_training_cannot_do(tmp_path):
     with pytest.raises(ValueError, match="divisible by minibatches"):
         SetGruConfig(num_envs=6, minibatches=4, run_dir=str(tmp_path))
     with pytest.raises(ValueError, match="collectors=0"):
+        SetGruConfig(num_envs=4, minibatches=2, collectors=2, label_coef=0.0, run_dir=str(tmp_path))
+    with pytest.raises(ValueError, match="0 with collectors >= 1"):
         SetGruConfig(num_envs=4, minibatches=2, collectors=2, run_dir=str(tmp_path))
 
 
