@@ -240,17 +240,40 @@ def _logit_to_trust(logit: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return torch.where(valid, torch.sigmoid(logit), torch.ones_like(logit))
 
 
+def acting_modules(cfg: "MappoConfig", labels: PendingLabels | None = None) -> list:
+    """What follows the actor's (μ, σ, valid) in the acting policy: held exploration noise, the
+    sample u = μ + σ ε with its log-probability, α = sigmoid(u), the in-loop smoother if
+    ``cfg.train_smoothing``, and, with ``labels``, the pending fault labels (training only)."""
+    from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule
+    from torchrl.envs.utils import ExplorationType
+
+    smoother = LoopSmoother(*cfg.smoothing) if cfg.train_smoothing else None
+    trust_key = (G, "raw_trust") if smoother is not None else (G, "action")
+    # exploration noise held over cfg.noise_hold steps
+    sample = ProbabilisticTensorDictModule(
+        in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
+        out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
+        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
+    modules = [TensorDictModule(HeldNoise(cfg.noise_hold), in_keys=[(G, "loc")], out_keys=[(G, "noise")]), sample,
+               TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[trust_key])]
+    if smoother is not None:
+        modules.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
+                                        out_keys=[(G, "action")]))
+    if labels is not None:
+        modules.append(TensorDictModule(labels, in_keys=[(G, "observation")], out_keys=[(G, "fault_label")]))
+    return modules
+
+
 def build_modules(cfg: "MappoConfig", labels: PendingLabels | None = None) -> tuple:
     """The actor network, its probabilistic torchrl wrapper, the acting policy and the critic module
     (with ``labels``, the acting policy also records the pending fault labels: training only).
 
     Returns:
-        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (held exploration noise,
-        then the in-loop smoother if ``cfg.train_smoothing``), critic TensorDictModule, the
-        HeldNoise module, the LoopSmoother or None)``.
+        ``(ChannelActor, ProbabilisticActor for the loss, acting policy (``acting_modules`` after
+        the actor), critic TensorDictModule, the HeldNoise module, the LoopSmoother or None)``.
     """
     # torchrl is imported here, not at the top, so that the CLI can read MappoConfig quickly
-    from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
+    from tensordict.nn import TensorDictModule, TensorDictSequential
     from torchrl.envs.utils import ExplorationType
     from torchrl.modules import ProbabilisticActor
 
@@ -261,23 +284,11 @@ def build_modules(cfg: "MappoConfig", labels: PendingLabels | None = None) -> tu
         params, in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid")},
         out_keys=[(G, "trust_logit")], distribution_class=MaskedNormal, return_log_prob=True,
         log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    smoother = LoopSmoother(*cfg.smoothing) if cfg.train_smoothing else None
-    trust_key = (G, "raw_trust") if smoother is not None else (G, "action")
-    to_trust = TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[trust_key])
-    # acting: the same parameters, with exploration noise held over cfg.noise_hold steps
-    noise = HeldNoise(cfg.noise_hold)
-    sample = ProbabilisticTensorDictModule(
-        in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
-        out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
-        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    acting = [params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]), sample, to_trust]
-    if smoother is not None:
-        acting.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
-                                       out_keys=[(G, "action")]))
-    if labels is not None:
-        acting.append(TensorDictModule(labels, in_keys=[(G, "observation")], out_keys=[(G, "fault_label")]))
-    policy = TensorDictSequential(*acting)
+    # acting: the same parameters
+    policy = TensorDictSequential(params, *acting_modules(cfg, labels))
+    noise = next(m.module for m in policy.module if isinstance(getattr(m, "module", None), HeldNoise))
+    smoothers = [m.module for m in policy.module if isinstance(getattr(m, "module", None), LoopSmoother)]
     critic_in = [(G, "observation"), "state"] + ([(G, "info", "position_error")] if cfg.privileged_critic else [])
     critic = TensorDictModule(SwarmCritic(N_FEATURES, cfg.critic_hidden, cfg.privileged_critic), in_keys=critic_in,
                               out_keys=[(G, "state_value")])
-    return actor_net, prob_actor, policy, critic, noise, smoother
+    return actor_net, prob_actor, policy, critic, noise, (smoothers[0] if smoothers else None)

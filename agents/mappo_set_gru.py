@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -49,11 +49,11 @@ from swarmloc.envs.tasks import get_spec
 
 from .mappo import REWARD_TERMS, TrainResult, _team_returns, probe_features
 from .mappo_collect import Collection
-from .mappo_config import SetGruConfig, V1_RANDOM_TASKS  # noqa: F401  (re-exported)
-from .mappo_nets import (G, HeldNoise, HeldNoiseNormal, LoopSmoother, MaskedNormal, PendingLabels, SwarmCritic,
-                         _logit_to_trust)
+from .mappo_config import V1_RANDOM_TASKS, SetGruConfig  # noqa: F401  (re-exported)
+from .mappo_nets import G, MaskedNormal, PendingLabels, SwarmCritic, acting_modules
 from .set_gru_policy import SetGruActor, SetGruPolicy, count_flops_per_channel
 from .smoothing import SMOOTHING_FLOPS_PER_CHANNEL
+
 
 class RecurrentParams(nn.Module):
     """``SetGruActor`` one env step at a time for the collectors: (μ, σ, valid), state kept per task.
@@ -90,28 +90,13 @@ class RecurrentParams(nn.Module):
 
 def build_policy(actor: SetGruActor, cfg: SetGruConfig,
                  labels: PendingLabels | None = None) -> tuple[nn.Module, RecurrentParams]:
-    """The acting policy (recurrent μ, held noise, sample, sigmoid, in-loop smoother) and its recurrent module;
-    with ``labels``, it also records the pending fault labels (training only)."""
-    from tensordict.nn import ProbabilisticTensorDictModule, TensorDictModule, TensorDictSequential
-    from torchrl.envs.utils import ExplorationType
+    """The acting policy (recurrent μ, then ``acting_modules``: held noise, sample, sigmoid, in-loop
+    smoother) and its recurrent module; with ``labels``, it also records the pending fault labels."""
+    from tensordict.nn import TensorDictModule, TensorDictSequential
 
     recurrent = RecurrentParams(actor)
     params = TensorDictModule(recurrent, in_keys=[(G, "observation")], out_keys=[(G, "loc"), (G, "scale"), (G, "valid")])
-    noise = HeldNoise(cfg.noise_hold)
-    sample = ProbabilisticTensorDictModule(
-        in_keys={"loc": (G, "loc"), "scale": (G, "scale"), "valid": (G, "valid"), "noise": (G, "noise")},
-        out_keys=[(G, "trust_logit")], distribution_class=HeldNoiseNormal, return_log_prob=True,
-        log_prob_key=(G, "trust_logit_log_prob"), default_interaction_type=ExplorationType.RANDOM)
-    smoother = LoopSmoother(*cfg.smoothing) if cfg.train_smoothing else None
-    trust_key = (G, "raw_trust") if smoother is not None else (G, "action")
-    acting = [params, TensorDictModule(noise, in_keys=[(G, "loc")], out_keys=[(G, "noise")]), sample,
-              TensorDictModule(_logit_to_trust, in_keys=[(G, "trust_logit"), (G, "valid")], out_keys=[trust_key])]
-    if smoother is not None:
-        acting.append(TensorDictModule(smoother, in_keys=[(G, "raw_trust"), (G, "observation")],
-                                       out_keys=[(G, "action")]))
-    if labels is not None:
-        acting.append(TensorDictModule(labels, in_keys=[(G, "observation")], out_keys=[(G, "fault_label")]))
-    return TensorDictSequential(*acting), recurrent
+    return TensorDictSequential(params, *acting_modules(cfg, labels)), recurrent
 
 
 def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]] | None = None,
@@ -158,7 +143,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
     flops_per_channel = count_flops_per_channel(actor) + SMOOTHING_FLOPS_PER_CHANNEL
 
     # ---- one batched env + collector per task, in this process; training seeds only
-    env_kwargs = [dict(reward_weights=cfg.weights(), policy_flops=flops_per_channel * get_spec(task).n_channels)
+    env_kwargs = [{"reward_weights": cfg.weights(), "policy_flops": flops_per_channel * get_spec(task).n_channels}
                   for task in cfg.tasks]
     collection = Collection(cfg.tasks, cfg.num_envs, cfg.rollout_steps, cfg.seed, policy, env_kwargs,
                             check_seeds=check_seeds, threads=cfg.threads)
