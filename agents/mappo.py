@@ -106,6 +106,65 @@ def _team_returns(reward: torch.Tensor, done: torch.Tensor, running: np.ndarray)
     return out
 
 
+def log_rollout(writer, batch, running: np.ndarray, task: str, frames: int) -> list[float]:
+    """Log a collected ``(B, T)`` batch (episodic returns, reward terms, mean trust); returns the finished
+    episodes' team returns. Shared by both MAPPO training loops."""
+    nxt = batch["next"]
+    returns = _team_returns(nxt[G, "reward"], nxt["done"], running)
+    if returns:
+        writer.add_scalar("charts/episodic_return", float(np.mean(returns)), frames)
+        writer.add_scalar(f"charts/episodic_return_{task.removeprefix('swarmloc/')}", float(np.mean(returns)), frames)
+    for term, name in REWARD_TERMS.items():
+        writer.add_scalar(f"charts/{name}", nxt[G, "info", term].mean().item(), frames)
+    writer.add_scalar("charts/trust_mean", batch[G, "action"][batch[G, "valid"]].mean().item(), frames)
+    return returns
+
+
+def normalized_advantages(batch, gae, reward_scale: float) -> float:
+    """GAE on the per-UAV reward (done flags broadcast to every UAV, rewards scaled), then the advantage
+    standardized over the batch, in place; returns the seconds GAE took."""
+    nxt = batch["next"]
+    reward_shape = nxt[G, "reward"].shape
+    for flag in ("done", "terminated"):
+        nxt.set((G, flag), nxt[flag].unsqueeze(-1).expand(reward_shape))
+    nxt.set((G, "reward"), nxt[G, "reward"] * reward_scale)
+    tic = time.perf_counter()
+    with torch.no_grad():
+        gae(batch)
+    seconds = time.perf_counter() - tic
+    adv = batch[G, "advantage"]
+    batch.set((G, "advantage"), (adv - adv.mean()) / adv.std().clamp(min=1e-6))
+    return seconds
+
+
+def label_loss(logits: torch.Tensor, fault_label: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """The privileged auxiliary loss: binary cross-entropy of the trust logits against "healthy" (not
+    fault-labelled), averaged over the present channels (``valid``, bool or 0/1)."""
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, (~fault_label).float(), reduction="none")
+    valid = valid.float()
+    return (bce * valid).sum() / valid.sum().clamp(min=1)
+
+
+def log_iteration(writer, bar, stats: dict[str, list[float]], log_std: float, probe_trust: torch.Tensor,
+                  probe_channels: dict[str, int], lr: float, frames: int, start: float,
+                  timings: dict[str, float], n_frames: int, task: str, returns: list[float]) -> None:
+    """The end of an iteration's logging: losses, log σ, the probe UAV's trust, learning rate, SPS,
+    timings and the progress bar."""
+    for key, vals in stats.items():
+        writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
+    writer.add_scalar("charts/log_std", log_std, frames)
+    for name, index in probe_channels.items():
+        writer.add_scalar(f"probe/trust_{name}", probe_trust[index].item(), frames)
+    writer.add_scalar("charts/learning_rate", lr, frames)
+    sps = frames / max(time.time() - start, 1e-9)
+    writer.add_scalar("charts/SPS", sps, frames)
+    for name, seconds in timings.items():
+        writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
+    bar.update(n_frames)
+    bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
+                    sps=f"{sps:.0f}")
+
+
 def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] | None = None,
           check_seeds: Callable[[list[int]], None] | None = None, writer=None) -> TrainResult:
     """Train the MAPPO link-trust actor and critic.
@@ -185,29 +244,8 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
         if cfg.anneal_lr:
             optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
 
-        # ---- logging of the raw rollout
-        nxt = batch["next"]
-        returns = _team_returns(nxt[G, "reward"], nxt["done"], running[t])
-        if returns:
-            writer.add_scalar("charts/episodic_return", float(np.mean(returns)), frames)
-            writer.add_scalar(f"charts/episodic_return_{task.removeprefix('swarmloc/')}", float(np.mean(returns)),
-                              frames)
-        for term, name in REWARD_TERMS.items():
-            writer.add_scalar(f"charts/{name}", nxt[G, "info", term].mean().item(), frames)
-        valid = batch[G, "valid"]
-        writer.add_scalar("charts/trust_mean", batch[G, "action"][valid].mean().item(), frames)
-
-        # ---- GAE on the per-UAV reward; done flags broadcast to every UAV
-        reward_shape = nxt[G, "reward"].shape
-        for flag in ("done", "terminated"):
-            nxt.set((G, flag), nxt[flag].unsqueeze(-1).expand(reward_shape))
-        nxt.set((G, "reward"), nxt[G, "reward"] * cfg.reward_scale)
-        tic = time.perf_counter()
-        with torch.no_grad():
-            gae(batch)
-        t_gae = time.perf_counter() - tic
-        adv = batch[G, "advantage"]
-        batch.set((G, "advantage"), (adv - adv.mean()) / adv.std().clamp(min=1e-6))
+        returns = log_rollout(writer, batch, running[t], task, frames)
+        t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
 
         # ---- PPO epochs over minibatches
         tic = time.perf_counter()
@@ -222,10 +260,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                 if labels is not None:
                     # privileged auxiliary loss (``label_coef``): logit → "healthy", present channels only
                     obs = mb[G, "observation"]
-                    valid = obs[..., VALID]
-                    bce = torch.nn.functional.binary_cross_entropy_with_logits(
-                        actor_net(obs), (~mb[G, "fault_label"]).float(), reduction="none")
-                    loss_label = (bce * valid).sum() / valid.sum().clamp(min=1)
+                    loss_label = label_loss(actor_net(obs), mb[G, "fault_label"], obs[..., VALID])
                     total = total + cfg.label_coef * loss_label
                     stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
@@ -236,21 +271,12 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                             "explained_variance"):
                     if key in out.keys():
                         stats.setdefault(key, []).append(float(out[key].detach().mean()))
-        for key, vals in stats.items():
-            writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
-        writer.add_scalar("charts/log_std", actor_net.log_std.item(), frames)
         with torch.no_grad():
             probe_trust = actor_net.trust(probe_x)
-        for name, index in probe_channels.items():
-            writer.add_scalar(f"probe/trust_{name}", probe_trust[index].item(), frames)
-        writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
-        sps = frames / max(time.time() - start, 1e-9)
-        writer.add_scalar("charts/SPS", sps, frames)
-        for name, seconds in (("collect", t_collect), ("gae", t_gae), ("update", time.perf_counter() - tic)):
-            writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
-        bar.update(batch.numel())
-        bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
-                        sps=f"{sps:.0f}")
+        log_iteration(writer, bar, stats, actor_net.log_std.item(), probe_trust, probe_channels,
+                      optimizer.param_groups[0]["lr"], frames, start,
+                      {"collect": t_collect, "gae": t_gae, "update": time.perf_counter() - tic}, batch.numel(), task,
+                      returns)
 
         # ---- evaluation and checkpoints
         final = it == n_iters - 1

@@ -125,6 +125,21 @@ def hidden_sizes(state_dict: dict[str, torch.Tensor]) -> tuple[int, ...]:
     return tuple(widths[:-1])
 
 
+def read_state_dict(path: Path, missing: str, keys: tuple[str, ...], wrong: str) -> dict[str, torch.Tensor]:
+    """A plain state_dict file's tensors (CPU, ``weights_only``).
+
+    Raises:
+        FileNotFoundError: no such file (``missing`` says how to train one).
+        ValueError: not a dict holding every one of ``keys`` (``wrong`` says what was expected).
+    """
+    if not path.is_file():
+        raise FileNotFoundError(missing)
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(state, dict) or any(k not in state for k in keys):
+        raise ValueError(wrong)
+    return state
+
+
 def load_actor(weights: str | Path) -> ChannelActor:
     """A ``ChannelActor`` from a plain state_dict file (``torch.save(actor.state_dict())``).
 
@@ -133,12 +148,9 @@ def load_actor(weights: str | Path) -> ChannelActor:
         ValueError: the file is not a ChannelActor state_dict.
     """
     path = Path(weights)
-    if not path.is_file():
-        raise FileNotFoundError(f"MAPPO weights {path} not found; train them with "
-                                f"`swarmloc train mappo --weights-out {path}` (see agents/weights/mappo.json)")
-    state = torch.load(path, map_location="cpu", weights_only=True)
-    if not isinstance(state, dict) or "body.0.weight" not in state:
-        raise ValueError(f"{path} is not a ChannelActor state_dict (expected keys body.*, log_std)")
+    state = read_state_dict(path, f"MAPPO weights {path} not found; train them with "
+                                  f"`swarmloc train mappo --weights-out {path}` (see agents/weights/mappo.json)",
+                            ("body.0.weight",), f"{path} is not a ChannelActor state_dict (expected keys body.*, log_std)")
     # weights from before the context input carry no flag: they are purely per-channel
     state.setdefault("context", torch.tensor(False))
     context = bool(state["context"])

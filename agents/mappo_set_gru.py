@@ -47,7 +47,7 @@ from torch import nn
 from swarmloc.envs.observation import N_FEATURES, VALID
 from swarmloc.envs.tasks import get_spec
 
-from .mappo import REWARD_TERMS, TrainResult, _team_returns, probe_features
+from .mappo import TrainResult, label_loss, log_iteration, log_rollout, normalized_advantages, probe_features
 from .mappo_collect import Collection
 from .mappo_config import V1_RANDOM_TASKS, SetGruConfig  # noqa: F401  (re-exported)
 from .mappo_nets import G, MaskedNormal, PendingLabels, SwarmCritic, acting_modules
@@ -175,28 +175,8 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
         if cfg.anneal_lr:
             optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
 
-        # ---- logging of the raw rollout
-        nxt = batch["next"]
-        returns = _team_returns(nxt[G, "reward"], nxt["done"], running[t])
-        if returns:
-            writer.add_scalar("charts/episodic_return", float(np.mean(returns)), frames)
-            writer.add_scalar(f"charts/episodic_return_{task.removeprefix('swarmloc/')}", float(np.mean(returns)),
-                              frames)
-        for term, name in REWARD_TERMS.items():
-            writer.add_scalar(f"charts/{name}", nxt[G, "info", term].mean().item(), frames)
-        writer.add_scalar("charts/trust_mean", batch[G, "action"][batch[G, "valid"]].mean().item(), frames)
-
-        # ---- GAE on the per-UAV reward; done flags broadcast to every UAV
-        reward_shape = nxt[G, "reward"].shape
-        for flag in ("done", "terminated"):
-            nxt.set((G, flag), nxt[flag].unsqueeze(-1).expand(reward_shape))
-        nxt.set((G, "reward"), nxt[G, "reward"] * cfg.reward_scale)
-        tic = time.perf_counter()
-        with torch.no_grad():
-            gae(batch)
-        t_gae = time.perf_counter() - tic
-        adv = batch[G, "advantage"]
-        batch.set((G, "advantage"), (adv - adv.mean()) / adv.std().clamp(min=1e-6))
+        returns = log_rollout(writer, batch, running[t], task, frames)
+        t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
 
         # ---- recurrent PPO: minibatches of whole rollouts, the actor replayed from h0
         tic = time.perf_counter()
@@ -223,9 +203,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                 total = loss_objective + cfg.critic_coef * loss_critic - cfg.entropy_coef * entropy
                 if labels is not None:
                     # privileged auxiliary loss: logit → "healthy" (not fault-labelled), present channels only
-                    healthy = (~mb[G, "fault_label"]).float()
-                    bce = nn.functional.binary_cross_entropy_with_logits(loc, healthy, reduction="none")
-                    loss_label = (bce * valid).sum() / n_valid
+                    loss_label = label_loss(loc, mb[G, "fault_label"], valid)
                     total = total + cfg.label_coef * loss_label
                     stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
@@ -243,21 +221,12 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                     if epoch == 0 and j == 0:
                         # the replay reproduces the collected log-probabilities (before any step of this batch)
                         stats["replay_log_ratio_max"] = [float(lr_.abs().max())]
-        for key, vals in stats.items():
-            writer.add_scalar(f"losses/{key}", float(np.mean(vals)), frames)
-        writer.add_scalar("charts/log_std", actor.log_std.item(), frames)
         with torch.no_grad():
             probe_mu, _ = actor.step(probe_x, actor.initial_state((probe_x.shape[0],)))
-        for name, index in probe_channels.items():
-            writer.add_scalar(f"probe/trust_{name}", torch.sigmoid(probe_mu[index]).item(), frames)
-        writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
-        sps = frames / max(time.time() - start, 1e-9)
-        writer.add_scalar("charts/SPS", sps, frames)
-        for name, seconds in (("collect", t_collect), ("gae", t_gae), ("update", time.perf_counter() - tic)):
-            writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
-        bar.update(batch.numel())
-        bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
-                        sps=f"{sps:.0f}")
+        log_iteration(writer, bar, stats, actor.log_std.item(), torch.sigmoid(probe_mu), probe_channels,
+                      optimizer.param_groups[0]["lr"], frames, start,
+                      {"collect": t_collect, "gae": t_gae, "update": time.perf_counter() - tic}, batch.numel(), task,
+                      returns)
 
         # ---- evaluation and checkpoints
         final = it == n_iters - 1

@@ -34,7 +34,7 @@ from torch import nn
 from swarmloc.envs.channels import N_KINDS, ChannelLayout
 from swarmloc.envs.observation import KIND0, N_FEATURES, VALID
 
-from .mappo_policy import LOGIT_LIMIT, weights_kinds
+from .mappo_policy import LOGIT_LIMIT, read_state_dict, weights_kinds
 from .protocols import TrustInput
 from .registry import WEIGHTS_DIR
 from .smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing
@@ -125,12 +125,9 @@ def load_set_gru_actor(weights: str | Path) -> SetGruActor:
         ValueError: the file is not a SetGruActor state_dict.
     """
     path = Path(weights)
-    if not path.is_file():
-        raise FileNotFoundError(f"mappo-set-gru weights {path} not found; train them with "
-                                f"`swarmloc train mappo-set-gru --weights-out {path}`")
-    state = torch.load(path, map_location="cpu", weights_only=True)
-    if not isinstance(state, dict) or "gru.weight_hh" not in state or "encode.0.weight" not in state:
-        raise ValueError(f"{path} is not a SetGruActor state_dict (expected keys encode.*, gru.*, head.*, log_std)")
+    state = read_state_dict(path, f"mappo-set-gru weights {path} not found; train them with "
+                                  f"`swarmloc train mappo-set-gru --weights-out {path}`", ("gru.weight_hh", "encode.0.weight"),
+                            f"{path} is not a SetGruActor state_dict (expected keys encode.*, gru.*, head.*, log_std)")
     embed, n_features = state["encode.0.weight"].shape
     actor = SetGruActor(n_features=int(n_features), embed=int(embed), hidden=int(state["gru.weight_hh"].shape[1]))
     actor.load_state_dict(state)

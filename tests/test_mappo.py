@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from trust_helpers import obs_input
 
 from swarmloc.agents.mappo_policy import (
     WEIGHTS_DIR,
@@ -30,14 +31,6 @@ def _random_obs(rng: np.random.Generator, b: int, n: int, n_l: int) -> np.ndarra
     obs = rng.uniform(0.0, 1.0, (b, n, n_l, N_FEATURES)).astype(np.float32)
     obs[..., VALID] = 1.0
     return obs
-
-
-def _trust_input(obs: np.ndarray):
-    from swarmloc.agents.protocols import TrustInput
-
-    b, n, n_l, _ = obs.shape
-    z = np.zeros((b, n, n_l))
-    return TrustInput.view(obs, z, z, z, np.ones((b, n, n_l)), np.zeros((b, n)), obs[..., VALID] > 0.5, 0.1, 1)
 
 
 def _tiny_config(tmp_path: Path, **kw):
@@ -76,22 +69,22 @@ def test_policy_any_swarm_size_and_channel_count(n, n_l, context):
     policy = MappoPolicy(ChannelActor(context=context))
     rng = np.random.default_rng(n)
     obs = _random_obs(rng, 3, n, n_l)
-    alpha = policy.act(_trust_input(obs))
+    alpha = policy.act(obs_input(obs))
     assert alpha.shape == (3, n, n_l) and alpha.dtype == np.float64
     assert np.all(alpha > 0.0) and np.all(alpha <= 1.0)
     ch, uav = rng.permutation(n_l), rng.permutation(n)
-    permuted = policy.act(_trust_input(np.ascontiguousarray(obs[:, uav][:, :, ch])))
+    permuted = policy.act(obs_input(np.ascontiguousarray(obs[:, uav][:, :, ch])))
     np.testing.assert_allclose(permuted, alpha[:, uav][:, :, ch], rtol=1e-6)
     moved = obs.copy()
     moved[0, 0, 0, :5] = 1.0 - moved[0, 0, 0, :5]  # change one channel of UAV 0 in episode 0
-    again = policy.act(_trust_input(moved))
+    again = policy.act(obs_input(moved))
     np.testing.assert_array_equal(again[1:], alpha[1:])  # other episodes
     np.testing.assert_array_equal(again[0, 1:], alpha[0, 1:])  # other UAVs: decentralized
     if not context:  # the paper's purely per-channel input: the UAV's other channels are unaffected too
         np.testing.assert_array_equal(again[0, 0, 1:], alpha[0, 0, 1:])
     absent = obs.copy()
     absent[..., 0, VALID] = 0.0
-    assert np.all(policy.act(_trust_input(absent))[..., 0] == 1.0)
+    assert np.all(policy.act(obs_input(absent))[..., 0] == 1.0)
 
 
 def test_policy_runs_on_tasks_of_different_shapes():
@@ -183,7 +176,7 @@ def test_shipped_weights_load_and_give_trust_in_unit_interval():
         rng = np.random.default_rng(0)
         obs = _random_obs(rng, 2, 4, 11)
         loaded.method.reset(2, _layout(4, 11), np.arange(2))
-        alpha = loaded.method.act(_trust_input(obs))
+        alpha = loaded.method.act(obs_input(obs))
         assert alpha.shape == (2, 4, 11) and np.all(alpha > 0.0) and np.all(alpha <= 1.0)
         if name == "mappo-no-isolation":
             assert np.all(alpha == 1.0)
@@ -330,7 +323,7 @@ def test_channel_kinds_outside_training_get_nominal_trust():
     some = MappoPolicy(actor, kinds=trained_kinds(["NLOS-v0"]))
     for policy in (everything, some):
         policy.reset(2, _layout(3, 5), np.arange(2))
-    a_all, a_some = everything.act(_trust_input(obs)), some.act(_trust_input(obs))
+    a_all, a_some = everything.act(obs_input(obs)), some.act(obs_input(obs))
     np.testing.assert_array_equal(a_some[..., [0, 1, 4]], a_all[..., [0, 1, 4]])
     assert np.all(a_some[..., [2, 3]] == 1.0) and np.all(a_all < 1.0)
     with pytest.raises(ValueError, match="kinds"):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from trust_helpers import obs_input
 
 from swarmloc.agents.set_gru_policy import SetGruActor, SetGruPolicy, count_flops_per_channel, load_set_gru_actor
 from swarmloc.envs.observation import N_FEATURES, VALID
@@ -21,14 +22,6 @@ def _obs(rng: np.random.Generator, *shape: int) -> torch.Tensor:
     x = torch.tensor(rng.uniform(0.0, 1.0, (*shape, N_FEATURES)), dtype=torch.float32)
     x[..., VALID] = 1.0
     return x
-
-
-def _inp(obs: np.ndarray):
-    from swarmloc.agents.protocols import TrustInput
-
-    b, n, n_l, _ = obs.shape
-    z = np.zeros((b, n, n_l))
-    return TrustInput.view(obs, z, z, z, np.ones((b, n, n_l)), np.zeros((b, n)), obs[..., VALID] > 0.5, 0.1, 1)
 
 
 def _actor(seed: int = 0) -> SetGruActor:
@@ -95,16 +88,16 @@ def test_policy_episodes_are_independent_and_reset_clears_memory():
     steps = [_obs(rng, 3, n, n_l).numpy() for _ in range(5)]
     batched, single = SetGruPolicy(_actor()), SetGruPolicy(_actor())
     batched.reset(3, layout, np.arange(3))
-    out_b = [batched.act(_inp(o)) for o in steps]
+    out_b = [batched.act(obs_input(o)) for o in steps]
     single.reset(1, layout, np.arange(1))
-    out_s = [single.act(_inp(o[1:2])) for o in steps]
+    out_s = [single.act(obs_input(o[1:2])) for o in steps]
     for ob, os_ in zip(out_b, out_s):
         np.testing.assert_allclose(ob[1:2], os_, rtol=1e-6, atol=1e-6)
     single.reset(1, layout, np.arange(1))
-    np.testing.assert_allclose(single.act(_inp(steps[0][1:2])), out_s[0], rtol=0, atol=0)
+    np.testing.assert_allclose(single.act(obs_input(steps[0][1:2])), out_s[0], rtol=0, atol=0)
     assert np.all((out_b[-1] > 0) & (out_b[-1] <= 1))
     with pytest.raises(ValueError, match="batch and layout of reset"):
-        batched.act(_inp(steps[0][:2]))
+        batched.act(obs_input(steps[0][:2]))
 
 
 def test_weights_round_trip_and_errors(tmp_path):

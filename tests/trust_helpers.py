@@ -22,3 +22,12 @@ def trust_input(nis: np.ndarray, valid: np.ndarray | None = None, step: int = 1)
     zeros = np.zeros(shape)
     return TrustInput.view(np.zeros((*shape, 11), np.float32), np.sqrt(nis), zeros, nis, np.ones(shape),
                            np.zeros(shape[:2]), valid, 0.1 * step, step)
+
+
+def obs_input(obs: np.ndarray) -> TrustInput:
+    """A ``TrustInput`` carrying the observation ``obs`` (B, N, L, F) (raw fields zero, trust 1, valid from obs)."""
+    from swarmloc.envs.observation import VALID
+
+    b, n, n_l, _ = obs.shape
+    z = np.zeros((b, n, n_l))
+    return TrustInput.view(obs, z, z, z, np.ones((b, n, n_l)), np.zeros((b, n)), obs[..., VALID] > 0.5, 0.1, 1)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from swarmloc.bench.training.mappo import TrainMappoArgs
+from swarmloc.bench.training.mappo import TrainMappoArgs, TrainSetGruArgs
 
 
 @dataclass
@@ -12,7 +12,7 @@ class Options(TrainMappoArgs):
     """Train MAPPO link trust on a task mixture (torchrl; training seeds only; dev-seed evaluation)."""
 
 
-def run(opts: Options) -> int:
+def run(opts: Options | TrainSetGruArgs) -> int:
     """Train, write the weights and their provenance record."""
     from swarmloc.bench.training.mappo import train_mappo
 

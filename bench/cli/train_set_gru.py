@@ -4,21 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from swarmloc.bench.cli.train_mappo import run  # noqa: F401  (``train_mappo`` dispatches on the config's type)
 from swarmloc.bench.training.mappo import TrainSetGruArgs
 
 
 @dataclass
 class Options(TrainSetGruArgs):
     """Train the set + GRU link-trust actor (mappo-set-gru) on the v1 randomized families (dev-seed evaluation)."""
-
-
-def run(opts: Options) -> int:
-    """Train, write the weights and their provenance record."""
-    from swarmloc.bench.training.mappo import train_mappo
-
-    try:
-        train_mappo(opts)
-    except (ValueError, KeyError) as err:
-        print(f"error: {err}")
-        return 2
-    return 0
