@@ -21,7 +21,7 @@ from swarmloc.agents.pf.filters import (
     PFNNOnlineOracle,
     make_pfnn,
 )
-from swarmloc.agents.pf.pfnn import PFNNWeights, load_weights, random_weights
+from swarmloc.agents.pf.pfnn import SHIPPED_WEIGHTS, PFNNWeights, load_weights, random_weights, shipped_weights
 from swarmloc.agents.pf.reference import ReferenceParticleFilter, systematic_resample_reference, uniform_np
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.envs.rng import Stream, uniform
@@ -207,7 +207,7 @@ def test_estimators_never_receive_truth(short):
             accessed.add(name)
             return getattr(self._m, name)
 
-    pf = make_pfnn_or_random()
+    pf = make_pfnn()
     pf.reset(short.facts, short.facts.x0)
     for m in short.meas[:3]:
         pf.step(Spy(m))
@@ -220,25 +220,18 @@ def test_estimators_never_receive_truth(short):
         assert not any("world" in mod or mod.startswith("swarmloc.bench") for mod in mods), (name, mods)
 
 
-def make_pfnn_or_random() -> ParticleFilter:
-    try:
-        return make_pfnn()
-    except FileNotFoundError:
-        return ParticleFilter(ADAPTIVE, network=random_weights(0, 0), name="pf-nn")
-
-
 def test_deterministic_and_batched_equals_single():
     seeds = [2_000_003, 2_000_004, 2_000_005]
     batched = Episode(seeds, duration=2.0)
-    a = batched.run(make_pfnn_or_random())
-    b = batched.run(make_pfnn_or_random())
+    a = batched.run(make_pfnn())
+    b = batched.run(make_pfnn())
     np.testing.assert_array_equal(a, b)
     for parallel in (True, False):
-        pf = make_pfnn_or_random()
+        pf = make_pfnn()
         pf.parallel = parallel
         np.testing.assert_array_equal(batched.run(pf), a)
     for j, seed in enumerate(seeds):
-        single = Episode([seed], duration=2.0).run(make_pfnn_or_random())
+        single = Episode([seed], duration=2.0).run(make_pfnn())
         np.testing.assert_array_equal(single[:, 0], a[:, j])
 
 
@@ -297,17 +290,35 @@ def test_fit_writes_weights_with_provenance(tmp_path):
     assert "git_commit" in record["provenance"]
 
 
-def test_shipped_weights_are_small_and_documented():
-    path = PF_DIR.parent / "weights" / "pfnn.npz"
-    if not path.exists():
-        pytest.skip("weights not trained yet (swarmloc train pfnn)")
+@pytest.mark.parametrize("version", sorted(SHIPPED_WEIGHTS))
+def test_shipped_weights_are_small_and_documented(version):
+    path = SHIPPED_WEIGHTS[version]
     assert path.stat().st_size < 10_000
     w = load_weights(path)
     assert w.W1.shape == (12, 6)
     record = json.loads(path.with_suffix(".json").read_text())
     assert record["command"].startswith("swarmloc train pfnn")
+    # each version's fit comes from its own Indoor task, on training seeds only
+    assert record["fit"]["task"] == f"swarmloc/Indoor-v{version}"
     assert all(s < 1_000_000 for s in record["fit"]["seeds"])
     assert record["provenance"]["git_commit"]
+
+
+def test_pfnn_runs_the_fit_of_the_task_version():
+    assert shipped_weights("swarmloc/Indoor-v0") == SHIPPED_WEIGHTS[0]
+    assert shipped_weights("swarmloc/Indoor-v1") == shipped_weights("swarmloc/NLOS-v1") == SHIPPED_WEIGHTS[1]
+    with pytest.raises(ValueError, match="'swarmloc/Indoor' has no version"):
+        shipped_weights("swarmloc/Indoor")
+    w0, w1 = load_weights(SHIPPED_WEIGHTS[0]), load_weights(SHIPPED_WEIGHTS[1])
+    assert not np.array_equal(w0.W1, w1.W1)
+    pf = make_pfnn()
+    for task, w in (("Indoor-v0", w0), ("Indoor-v1", w1), ("Indoor-v0", w0)):
+        ep = Episode([2_000_000], duration=0.3, task=task)
+        pf.reset(ep.facts, ep.facts.x0)
+        np.testing.assert_array_equal(pf.network.W1, w.W1)
+        # and it is the fixed-network filter with that fit, step for step
+        fixed = ParticleFilter(ADAPTIVE, network=w, name="pf-nn")
+        np.testing.assert_array_equal(ep.run(pf), ep.run(fixed))
 
 
 def test_online_oracle_is_privileged_and_learns_from_truth(short):

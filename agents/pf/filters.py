@@ -8,7 +8,7 @@ All share one batched kernel (``core.pf_step``) and differ in configuration:
 | ``pf`` | fixed 500 | — |
 | ``pf-800`` | fixed 800 | — |
 | ``adaptive-pf`` | 300 at start, ESS-adaptive in [100, 800] | — |
-| ``pf-nn`` | as ``adaptive-pf`` | frozen, trained offline on training seeds |
+| ``pf-nn`` | as ``adaptive-pf`` | frozen, trained offline on training seeds (the fit of the task's benchmark version) |
 | ``pf-nn-online-oracle`` | as ``adaptive-pf`` | the paper's online training on ground truth (privileged) |
 
 Each estimator receives only :class:`TaskFacts` and :class:`Measurements` (no truth); the
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -29,7 +30,7 @@ from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
 from swarmloc.envs.rng import uniform
 
 from . import core
-from .pfnn import PFNNWeights, load_weights, random_weights, sgd_step
+from .pfnn import PFNNWeights, load_weights, random_weights, sgd_step, shipped_weights
 
 _INT = np.int64
 #: below this many particle slots (B·N·M_max) one thread beats the pool's synchronisation
@@ -377,12 +378,35 @@ def make_adaptive_pf() -> ParticleFilter:
     return ParticleFilter(ADAPTIVE, name="adaptive-pf")
 
 
+class ShippedPFNN(ParticleFilter):
+    """PF-NN with the shipped network of each task's benchmark version, chosen at ``reset``.
+
+    A v0 task runs the Indoor-v0 fit (``pfnn.npz``, so v0 results stay as shipped), a v1 task
+    the Indoor-v1 fit (``pfnn_v1.npz``); see ``pfnn.shipped_weights``.
+    """
+
+    def __init__(self, parallel: bool | None = None):
+        super().__init__(ADAPTIVE, network=None, name="pf-nn", parallel=parallel)
+        self._loaded: dict[Path, PFNNWeights] = {}
+
+    def reset(self, facts: TaskFacts, x0: np.ndarray) -> None:
+        """Load the network of ``facts.task_id``'s version, then start B episodes as ``ParticleFilter``."""
+        path = shipped_weights(facts.task_id)
+        if path not in self._loaded:
+            self._loaded[path] = load_weights(path)
+        self.network = self._loaded[path]
+        super().reset(facts, x0)
+
+
 def make_pfnn(weights: str | None = None) -> ParticleFilter:
     """PF-NN: the adaptive PF with the frozen, offline-trained weight-correction network.
 
     Args:
-        weights: path of a ``.npz`` (default: the shipped ``agents/weights/pfnn.npz``).
+        weights: path of a ``.npz`` used on every task (default: the shipped fit of each
+            task's benchmark version, ``ShippedPFNN``).
     """
+    if weights is None:
+        return ShippedPFNN()
     return ParticleFilter(ADAPTIVE, network=load_weights(weights), name="pf-nn")
 
 

@@ -5,9 +5,11 @@ estimate, eq. 11), ``y = σ(W2 · tanh(W1 f + b1) + b2)`` (eq. 12–13), and the
 weight is multiplied by ``0.7 + 0.6·(y − 0.5)`` ∈ [0.4, 1.0] (eq. 14). Training targets
 are ``exp(−‖p_j − p_true‖)`` (eq. 15) with a mean-squared loss (eq. 16).
 
-Weights live in a small ``.npz`` (``W1 (H, 6)``, ``b1 (H,)``, ``W2 (H,)``, ``b2 ()``); the
-shipped ones are ``agents/weights/pfnn.npz`` with their provenance in ``pfnn.json``. This
-module is numpy only; the offline fit (torch) is in ``train.py``.
+Weights live in a small ``.npz`` (``W1 (H, 6)``, ``b1 (H,)``, ``W2 (H,)``, ``b2 ()``), each
+with its provenance ``.json`` beside it. One fit is shipped per benchmark version, on that
+version's Indoor task (training seeds only): ``agents/weights/pfnn.npz`` (Indoor-v0, frozen
+with v0) and ``pfnn_v1.npz`` (Indoor-v1); ``shipped_weights`` picks the one of a task's
+version. This module is numpy only; the offline fit (torch) is in ``bench/training/pfnn.py``.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from gymnasium.envs.registration import parse_env_id
 
 from swarmloc.envs.rng import Stream, normal_array
 
@@ -25,8 +28,22 @@ from .core import SLOT_NN_INIT, rng_index
 
 N_FEATURES = 6
 HIDDEN = 12
-#: where the shipped, offline-trained weights live
+#: the shipped, offline-trained weights of the v0 tasks (fitted on Indoor-v0; frozen with v0)
 WEIGHTS_PATH = WEIGHTS_DIR / "pfnn.npz"
+#: the shipped weights per benchmark version, each fitted on that version's Indoor task
+SHIPPED_WEIGHTS: dict[int, Path] = {0: WEIGHTS_PATH, 1: WEIGHTS_DIR / "pfnn_v1.npz"}
+
+
+def shipped_weights(task_id: str) -> Path:
+    """The shipped weights for ``task_id``: the fit of its benchmark version, else of the newest older one.
+
+    ``swarmloc/Indoor-v0`` → ``pfnn.npz``; ``swarmloc/Indoor-v1`` and every other v1 task →
+    ``pfnn_v1.npz``. A task ID without a version is an error.
+    """
+    _, _, version = parse_env_id(task_id)
+    if version is None:
+        raise ValueError(f"task ID {task_id!r} has no version; expected e.g. 'swarmloc/Indoor-v1'")
+    return SHIPPED_WEIGHTS[max(v for v in SHIPPED_WEIGHTS if v <= version)]
 
 
 @dataclass(frozen=True)
