@@ -234,6 +234,18 @@ def test_reproduce_madrl_checks_its_arguments(tmp_path):
         reproduce_madrl(tmp_path, seeds=2, traces=3)
     with pytest.raises(FileNotFoundError, match="swarmloc train mappo"):
         reproduce_madrl(tmp_path, seeds=1, traces=1, weights=tmp_path / "missing.pt")
+    with pytest.raises(ValueError, match="version must be one of \\[0, 1\\], got 2"):
+        reproduce_madrl(tmp_path, version=2)
+
+
+def test_reproduce_madrl_names_the_tasks_of_its_version():
+    from swarmloc.bench.reproduce.madrl import Runs
+
+    v0, v1 = Runs(seeds=[1], weights={}, version=0), Runs(seeds=[1], weights={})
+    assert v0.task("NLOSStep") == "swarmloc/NLOSStep-v0" and v1.task("NLOSStep") == "swarmloc/NLOSStep-v1"
+    # the learned reference is measured beside mappo on v1 only
+    assert v0.learned("uniform", "mappo") == ("uniform", "mappo")
+    assert v1.learned("uniform", "mappo") == ("uniform", "mappo", "mappo-set-gru")
 
 
 def test_cli_registers_train_mappo_and_reproduce_madrl():
