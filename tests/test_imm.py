@@ -191,3 +191,27 @@ def test_config_rejects_bad_values():
     facts = TaskFacts.from_spec(spec, world.layout, world.reset([0]), episode_keys([0]))
     with pytest.raises(ValueError, match="GPS"):
         ImmEstimator("kf").reset(facts, facts.x0)
+
+
+def test_cross_kernel_leaves_a_gross_outlier_much_of_its_weight_off_the_common_direction():
+    """What the v1 reproduction's reading says of Γ̃ (h = 0.15, σ₁ = 2, σ₂ = 8, eq. 22–27)."""
+    G = correntropy_gain(np.array([20.0, 15.0, 10.0]), 0.15, 2.0, 8.0)
+    w, V = np.linalg.eigh(G)
+    np.testing.assert_allclose(w, [0.0, 0.394, 0.559], atol=1e-3)
+    # the suppressed direction is the common one (all axes off together)
+    assert abs(V[:, 0] @ np.ones(3)) / math.sqrt(3) > 0.99
+
+
+@pytest.mark.parametrize("version", [0, 1])
+def test_reproduce_immarkf_runs_each_version(tmp_path, version):
+    import json
+
+    from swarmloc.bench.reproduce.immarkf import reproduce_immarkf
+
+    path = reproduce_immarkf(tmp_path, seeds=2, duration=2.0, version=version)
+    text = path.read_text()
+    assert f"HybridNoise{{10,30,50}}-v{version}" in text and "### Reading" in text
+    raw = json.loads(path.with_suffix(".json").read_text())
+    assert raw["version"] == version and len(raw["rmse"]["imm-arkf|30|nominal"]) == 2
+    with pytest.raises(ValueError, match="version must be one of"):
+        reproduce_immarkf(tmp_path, seeds=2, version=3)

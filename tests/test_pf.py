@@ -365,6 +365,9 @@ def test_reproduce_smoke(tmp_path):
         assert needle in text
     raw = json.loads(path.with_suffix(".json").read_text())
     assert raw["seeds"] == [1_000_000, 1_000_001]
+    assert raw["task"] == "swarmloc/Indoor-v1" and "on swarmloc/Indoor-v1" in text
+    with pytest.raises(ValueError, match="version must be 0 or 1, got 2"):
+        reproduce_pfnn(tmp_path, seeds=2, version=2)
 
 
 def test_cli_groups_register_train_and_reproduce_pfnn():

@@ -1,4 +1,4 @@
-"""``swarmloc reproduce immarkf``: imm-arkf Table 2 on HybridNoise{10,30,50}-v0."""
+"""``swarmloc reproduce immarkf``: imm-arkf Table 2 on HybridNoise{10,30,50}."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 @dataclass
 class Options:
-    """imm-arkf Table 2 on HybridNoise{10,30,50}-v0 (IMM-ARKF vs IMM-KF vs IMM-EKF), beside the paper's numbers."""
+    """imm-arkf Table 2 on HybridNoise{10,30,50} (IMM-ARKF vs IMM-KF vs IMM-EKF), beside the paper's numbers."""
 
     out: Path = Path("immarkf.md")
     """Markdown file to write (a folder: <out>/immarkf.md); raw numbers go beside it as .json."""
@@ -16,6 +16,8 @@ class Options:
     """Test seeds per task (1_000_000 …), at least 2."""
     duration: float | None = None
     """Episode length [s] (default: the tasks' 60 s)."""
+    version: int = 1
+    """Benchmark version of the tasks: 1 (contamination mixture) or 0 (the frozen v0, eq. 1 as printed)."""
 
 
 def run(opts: Options) -> int:
@@ -23,7 +25,7 @@ def run(opts: Options) -> int:
     from swarmloc.bench.reproduce.immarkf import reproduce_immarkf
 
     try:
-        path = reproduce_immarkf(opts.out, opts.seeds, opts.duration)
+        path = reproduce_immarkf(opts.out, opts.seeds, opts.duration, opts.version)
     except ValueError as err:
         print(f"error: {err}")
         return 2

@@ -8,18 +8,20 @@ from pathlib import Path
 
 @dataclass
 class Options:
-    """pf-nn Tables 4 (accuracy) and 5 (time per step) on Indoor-v0, beside the paper's numbers."""
+    """pf-nn Tables 4 (accuracy) and 5 (time per step) on Indoor, beside the paper's numbers."""
 
     out: Path = Path("pfnn.md")
     """Markdown file to write (a folder: <out>/pfnn.md); raw numbers go beside it as .json."""
     seeds: int = 32
-    """Indoor-v0 test seeds (1_000_000 …)."""
+    """Indoor test seeds (1_000_000 …)."""
     duration: float | None = None
     """Episode length [s] (default: the task's 100 s)."""
     timing_steps: int = 300
     """Steps of the Table 5 timing episode."""
     oracle: bool = True
     """Also run the privileged online-trained PF-NN (shown apart)."""
+    version: int = 1
+    """Benchmark version of the task: 1 (Indoor-v1, pf-nn's v1 fit) or 0 (the frozen Indoor-v0)."""
 
 
 def run(opts: Options) -> int:
@@ -27,7 +29,8 @@ def run(opts: Options) -> int:
     from swarmloc.bench.reproduce.pfnn import reproduce_pfnn
 
     try:
-        path = reproduce_pfnn(opts.out, opts.seeds, opts.duration, opts.timing_steps, opts.oracle)
+        path = reproduce_pfnn(opts.out, opts.seeds, opts.duration, opts.timing_steps, opts.oracle,
+                                  version=opts.version)
     except (ValueError, FileNotFoundError) as err:
         print(f"error: {err}")
         return 2

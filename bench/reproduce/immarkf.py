@@ -1,4 +1,7 @@
-"""``swarmloc reproduce immarkf``: imm-arkf Table 2 on HybridNoise{10,30,50}-v0, beside the paper's numbers.
+"""``swarmloc reproduce immarkf``: imm-arkf Table 2 on HybridNoise{10,30,50}, beside the paper's numbers.
+
+``version`` picks the tasks: 1 (default) the v1 contamination mixture, 0 the frozen v0
+weighted sum (imm-arkf eq. 1 as printed).
 
 RMSE of ``imm-arkf``, ``imm-kf``, ``imm-ekf`` at the filter noise settings R = 0.5, 1.5, 8
 (the paper's columns) and at the registered default (the task's nominal σ²), mean step
@@ -49,15 +52,17 @@ def _imm(name: str, **overrides: Any) -> Factory:
     return lambda: make_imm(_IMM_VARIANTS[name], **overrides)  # type: ignore[arg-type]
 
 
-def reproduce_immarkf(out: Path, seeds: int = 16, duration: float | None = None) -> Path:
-    """imm-arkf Table 2 on HybridNoise{10,30,50}-v0; writes markdown (+ .json) and returns its path."""
+def reproduce_immarkf(out: Path, seeds: int = 16, duration: float | None = None, version: int = 1) -> Path:
+    """imm-arkf Table 2 on HybridNoise{10,30,50}-v<version>; writes markdown (+ .json) and returns its path."""
+    if version not in _READING:
+        raise ValueError(f"version must be one of {sorted(_READING)}, got {version!r}")
     S = seeds_from(seeds)
     over = {"duration": duration} if duration else {}
     rmse: dict[str, list[float]] = {}
     orderings: list[dict] = []
     ablations: dict[str, list[float]] = {}
     for p in (10, 30, 50):
-        spec = get_spec(f"HybridNoise{p}-v0", **over)
+        spec = get_spec(f"HybridNoise{p}-v{version}", **over)
         for r in (None,) + IMM_R:
             col = "nominal" if r is None else f"R={r:g}"
             got = {f: np.array([m["rmse"] for m in runner_metrics(f, _imm(f, r=r), spec, S)]) for f in _IMM_VARIANTS}
@@ -65,25 +70,72 @@ def reproduce_immarkf(out: Path, seeds: int = 16, duration: float | None = None)
                 rmse[f"{f}|{p}|{col}"] = v.tolist()
             for other in ("imm-kf", "imm-ekf"):
                 orderings.append(paired(got["imm-arkf"], got[other], f"imm-arkf < {other} at {p} %, {col}"))
-        for label, kw in (("imm-arkf without fading (λ = 1)", {"fading": False}),
-                          ("imm-arkf with the printed Γ (eq. 27, unnormalized)", {"normalize_gamma": False})):
+        for label, kw in zip(_ABLATIONS, ({"fading": False}, {"normalize_gamma": False}), strict=True):
             ablations[f"{label}|{p}"] = [m["rmse"] for m in runner_metrics(label, _imm("imm-arkf", **kw), spec, S)]
-    timing = {f: episode_errors(_imm(f), get_spec("HybridNoise30-v0", duration=20.0), [S[0]])["step_ms"]
+    timing = {f: episode_errors(_imm(f), get_spec(f"HybridNoise30-v{version}", duration=20.0), [S[0]])["step_ms"]
               for f in _IMM_VARIANTS}
-    raw = {"seeds": S, "rmse": rmse, "ablations": ablations, "orderings": orderings, "step_ms": timing}
+    raw = {"version": version, "seeds": S, "rmse": rmse, "ablations": ablations, "orderings": orderings,
+           "step_ms": timing}
     return write_paper_report(out, "immarkf", _render_imm(raw, duration), raw)
+
+
+def _reading_v0(raw: dict) -> str:
+    return ("The paper's ordering does not appear in our world; the ARKF is 1–3 cm *worse* than the KF and the "
+            "EKF at every ratio and R except R = 0.5 at 50 %, where they tie. Our hybrid noise is the paper's "
+            "eq. 1 as printed, a weighted *sum* a·t_ν + (1 − a)·N(0, 1) with ν ∈ [25, 50]: nearly Gaussian, "
+            "std 0.7–0.9 m, shrinking as a grows. There are no outliers to reject, and the correntropy weights "
+            "can only lower the gain (Γ̃ ⪯ I), so ordinary residuals inflate R and the ARKF under-uses good "
+            "fixes; the fading factor is not the cause (the λ = 1 ablation is as good as the full ARKF). The "
+            "printed Γ (eq. 27) inflates R 11–27× and over-smooths our 2 m/s figure-eight; in the paper "
+            "(0.4 m/s Crazyflies at 31 Hz) heavy smoothing pays — its RMSE falls as R grows, ours rises. The "
+            "EKF on converted range/bearing tracks the KF to within 1 mm.")
+
+
+def _reading_v1(raw: dict) -> str:
+    def raw_get(key: str, p: int) -> np.ndarray:
+        return np.asarray(raw["ablations"][f"{key}|{p}"] if key in _ABLATIONS else raw["rmse"][f"{key}|{p}|nominal"])
+
+    def diff(a: str, b: str, p: int) -> float:
+        return float(np.mean(raw_get(a, p) - raw_get(b, p)))
+
+    full = ", ".join(f"{diff('imm-arkf', 'imm-kf', p):+.3f}" for p in (10, 30, 50))
+    no_fading = ", ".join(f"{diff(_ABLATIONS[0], 'imm-kf', p):+.3f}" for p in (10, 30, 50))
+    diverged = {p: int(np.sum(raw_get("imm-arkf", p) > 3.0 * raw_get("imm-kf", p))) for p in (10, 30, 50)}
+    n = len(raw["seeds"])
+    return ("With outliers in the data (v1: each fix is, with probability p, a trivariate Student-t draw, "
+            "ν 3–8), the ARKF's robust update does what the paper says: without the fading factor (λ = 1) it "
+            f"beats the KF at nominal R by {no_fading} m at 10 / 30 / 50 %. The full ARKF does not "
+            f"({full} m). The fading factor's χ² test (eq. 29–32) runs on the robust-weighted residual, and the "
+            "robust weights leave a gross outlier much of its weight: with h = 0.15 the cross-component kernel "
+            "(eq. 24–26, σ₂ = 8) dominates Γ, and it sees only the differences between axes, so off the common "
+            "direction Γ̃ keeps 0.4–0.7 of its weight (0.39 and 0.56 for a whitened residual (20, 15, 10)). "
+            "Such a fix fails the test, λ inflates the predicted covariance on exactly that fix (up to a few "
+            "hundred-fold), and the filter follows it. Once the estimate is several σ off, the next fixes look "
+            "like outliers to the correntropy weights and are discounted, so it does not come back: episodes "
+            "with ARKF "
+            f"RMSE above 3× the KF's: {diverged[10]}/{n}, {diverged[30]}/{n}, {diverged[50]}/{n}. The paper's "
+            "ordering (its Table 2) is therefore a property of its robust weights, not of the fading factor, "
+            "in our world; we keep the method as printed and report the ablation.")
+
+
+_READING = {0: _reading_v0, 1: _reading_v1}
+_ABLATIONS = ("imm-arkf without fading (λ = 1)", "imm-arkf with the printed Γ (eq. 27, unnormalized)")
 
 
 def _render_imm(raw: dict, duration: float | None) -> str:
     n = len(raw["seeds"])
-    lines = ["# imm-arkf reproduction on swarmloc/HybridNoise{10,30,50}-v0", "",
-             f"{n} test seeds ({raw['seeds'][0]} …), {duration or 60:g} s episodes, 9 UAVs, followers 1–8 scored; "
+    version = raw.get("version", 0)
+    noise = ("the paper's eq. 1 as printed" if version == 0 else
+             "a contamination mixture, Student-t with probability p")
+    lines = [f"# imm-arkf reproduction on swarmloc/HybridNoise{{10,30,50}}-v{version}", "",
+             f"GPS noise of the followers: {noise}.", "",
+             (f"{n} test seeds ({raw['seeds'][0]} …), {duration or 60:g} s episodes, 9 UAVs, followers 1–8 scored; "
              "ours: RMSE mean ± std over seeds (runner metric: pooled over follower-steps); paper: mean ± std over "
              "100 Monte Carlo runs (Table 2). Columns are the filter's measurement noise R·I; 'nominal' is the "
-             "registered default (the task's σ² = 1 m² for the followers).", "",
+             "registered default (the task's σ² = 1 m² for the followers)."), "",
              "## Table 2 — RMSE (m) and time per step", "",
-             "| filter | t-ratio | R=0.5 ours | paper | R=1.5 ours | paper | R=8 ours | paper | nominal ours "
-             "| ms/step ours (9 UAVs) | paper avg time (ms) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             ("| filter | t-ratio | R=0.5 ours | paper | R=1.5 ours | paper | R=8 ours | paper | nominal ours "
+             "| ms/step ours (9 UAVs) | paper avg time (ms) |"), "|---|---|---|---|---|---|---|---|---|---|---|"]
     for f in _IMM_VARIANTS:
         for p in (10, 30, 50):
             pap = PAPER_IMM_TABLE2[(f, p)]
@@ -97,14 +149,5 @@ def _render_imm(raw: dict, duration: float | None) -> str:
         lines.append(f"| {label} | " + " | ".join(mean_sd(raw["ablations"][f"{label}|{p}"]) for p in (10, 30, 50)) + " |")
     lines += ["", "### The paper's ordering (paired per-seed RMSE differences, 95 % bootstrap CI)", ""]
     lines += ordering_table(raw["orderings"])
-    lines += ["", "### Reading", "",
-              "The paper's ordering does not appear in our world; the ARKF is 1–3 cm *worse* than the KF and the "
-              "EKF at every ratio and R except R = 0.5 at 50 %, where they tie. Our hybrid noise is the paper's "
-              "eq. 1 as printed, a weighted *sum* a·t_ν + (1 − a)·N(0, 1) with ν ∈ [25, 50]: nearly Gaussian, "
-              "std 0.7–0.9 m, shrinking as a grows. There are no outliers to reject, and the correntropy weights "
-              "can only lower the gain (Γ̃ ⪯ I), so ordinary residuals inflate R and the ARKF under-uses good "
-              "fixes; the fading factor is not the cause (the λ = 1 ablation is as good as the full ARKF). The "
-              "printed Γ (eq. 27) inflates R 11–27× and over-smooths our 2 m/s figure-eight; in the paper "
-              "(0.4 m/s Crazyflies at 31 Hz) heavy smoothing pays — its RMSE falls as R grows, ours rises. The "
-              "EKF on converted range/bearing tracks the KF to within 1 mm.", ""]
+    lines += ["", "### Reading", "", _READING[version](raw), ""]
     return "\n".join(lines)

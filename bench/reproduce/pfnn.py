@@ -1,9 +1,12 @@
-"""``swarmloc reproduce pfnn``: pf-nn Tables 4 and 5 on Indoor-v0, our numbers beside the paper's.
+"""``swarmloc reproduce pfnn``: pf-nn Tables 4 and 5 on Indoor, our numbers beside the paper's.
+
+``version`` picks the task: Indoor-v1 (default; ``pf-nn`` runs its Indoor-v1 fit) or the
+frozen Indoor-v0 (its v0 fit).
 
 Table 4 (accuracy): RMSE, mean and max error and average particles per UAV-step for
 ``pf`` (500), ``pf-800``, ``adaptive-pf``, ``pf-nn`` (offline-trained, frozen) and the
 uniform-trust CEKF (the paper's "EKF Cooperative"), each through the runner on the same
-Indoor-v0 test seeds (mean ± std over seeds, and the 95 % bootstrap CI of the mean RMSE).
+Indoor test seeds (mean ± std over seeds, and the 95 % bootstrap CI of the mean RMSE).
 The privileged ``pf-nn-online-oracle`` (the paper's online training on ground truth) is
 run on the same seeds and shown apart. The paper's ordering claim
 (PF-NN ≤ adaptive PF ≤ PF in RMSE) is checked with paired per-seed differences and their
@@ -37,7 +40,7 @@ from swarmloc.bench.speed.estimators import record, time_cekf, time_estimator
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 
-TASK = "swarmloc/Indoor-v0"
+TASK = "swarmloc/Indoor-v1"
 #: method label → entry point (registry names once the PF family is registered)
 METHODS: dict[str, str] = {
     "pf": "swarmloc.agents.pf.filters:make_pf",
@@ -163,10 +166,10 @@ def table5(steps: int) -> dict[str, dict]:
 
 
 def render(results: dict[str, MethodResult], oracle: MethodResult | None, timing: dict[str, dict],
-           n_seeds: int, duration: float, first_seed: int) -> str:
+           n_seeds: int, duration: float, first_seed: int, task: str = TASK) -> str:
     """The markdown report."""
     lines = [
-        "# pf-nn reproduction on swarmloc/Indoor-v0",
+        f"# pf-nn reproduction on {task}",
         "",
         f"{n_seeds} test seeds ({first_seed} …), {duration:g} s episodes, 6 UAVs; ours: mean ± std over seeds "
         "(95 % bootstrap CI of the mean RMSE); paper: mean ± std over 20 runs (pf-nn Table 4).",
@@ -199,7 +202,7 @@ def render(results: dict[str, MethodResult], oracle: MethodResult | None, timing
         lines.append(f"| {row['claim']} | {row['mean_diff']:+.4f} | [{row['ci'][0]:+.4f}, {row['ci'][1]:+.4f}] "
                      f"| {'yes' if row['holds'] else 'no'} | {'yes' if row['significant'] else 'no'} "
                      f"| {row['wins']}/{row['n']} |")
-    lines += ["", "## Table 5 — time per step (B = 1, 6 UAVs)", "",
+    lines += ["", "## Table 5 — time per step (B = 1, 6 UAVs, a recorded Indoor-v0 episode)", "",
               "| method | median (ms) | mean ± std (ms) | particles | paper (ms, MATLAB / Apple M1) |",
               "|---|---|---|---|---|"]
     for label, t in timing.items():
@@ -216,19 +219,22 @@ def render(results: dict[str, MethodResult], oracle: MethodResult | None, timing
 
 
 def reproduce_pfnn(out: Path, seeds: int = 32, duration: float | None = None, timing_steps: int = 300,
-                   oracle: bool = True) -> Path:
+                   oracle: bool = True, version: int = 1) -> Path:
     """Run pf-nn Tables 4 and 5 and write the markdown report (and the raw numbers as JSON).
 
     Args:
         out: markdown file to write (a folder: ``<out>/pfnn.md``); raw numbers go beside it (``.json``).
-        seeds: number of Indoor-v0 test seeds (1_000_000 …).
+        seeds: number of Indoor test seeds (1_000_000 …).
         duration: episode length [s] (default: the task's 100 s).
         timing_steps: steps of the Table 5 timing episode.
         oracle: also run the privileged online-trained PF-NN.
+        version: benchmark version of the Indoor task, 0 or 1.
 
     Returns:
         The markdown path.
     """
+    if version not in (0, 1):
+        raise ValueError(f"version must be 0 or 1, got {version!r}")
     if seeds < 2:
         raise ValueError(f"seeds={seeds} must be >= 2 (bootstrap CIs need spread)")
     out = Path(out)
@@ -236,14 +242,15 @@ def reproduce_pfnn(out: Path, seeds: int = 32, duration: float | None = None, ti
         out = out / "pfnn.md"
     if not out.parent.exists():
         raise FileNotFoundError(f"output folder {out.parent} does not exist")
-    spec = get_spec(TASK, **({"duration": duration} if duration else {}))
+    task = f"swarmloc/Indoor-v{version}"
+    spec = get_spec(task, **({"duration": duration} if duration else {}))
     seed_list = [TEST_SEED_START + i for i in range(seeds)]
     results = {label: _run_runner(label, entry, spec, seed_list) for label, entry in METHODS.items()}
     orc = run_oracle(spec, seed_list) if oracle else None
     timing = table5(timing_steps)
-    text = render(results, orc, timing, seeds, spec.duration, seed_list[0])
+    text = render(results, orc, timing, seeds, spec.duration, seed_list[0], task)
     raw = {
-        "task": TASK, "seeds": seed_list, "duration": spec.duration,
+        "task": task, "seeds": seed_list, "duration": spec.duration,
         "table4": {k: {f: getattr(v, f).tolist() for f in ("rmse", "mean_error", "max_error", "particles")}
                    for k, v in {**results, **({ORACLE: orc} if orc else {})}.items()},
         "ordering": ordering(results), "table5": timing,
