@@ -150,3 +150,20 @@ def test_bad_inputs_are_rejected():
     facts = TaskFacts.from_spec(spec, world.layout, world.reset([0]), episode_keys([0]))
     with pytest.raises(ValueError, match="GPS"):
         FederatedEstimator().reset(facts, facts.x0)
+
+
+@pytest.mark.parametrize("version", [0, 1])
+def test_reproduce_federated_runs_each_version(tmp_path, version):
+    import json
+
+    from swarmloc.bench.reproduce.federated import reproduce_federated
+
+    path = reproduce_federated(tmp_path, seeds=2, version=version)
+    text = path.read_text()
+    assert f"GradualFault-v{version}" in text and "### Reading" in text
+    raw = json.loads(path.with_suffix(".json").read_text())
+    assert raw["version"] == version and len(raw["orderings"]) == 4
+    if version == 1:  # the v1 reading quotes each ordering's measured difference
+        assert f"{raw['orderings'][0]['mean_diff']:+.3f} m" in text
+    with pytest.raises(ValueError, match="version must be one of"):
+        reproduce_federated(tmp_path, seeds=2, version=2)

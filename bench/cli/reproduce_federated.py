@@ -1,4 +1,4 @@
-"""``swarmloc reproduce federated``: federated Tables 2–3 on GradualFault-v0."""
+"""``swarmloc reproduce federated``: federated Tables 2–3 on GradualFault."""
 
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ from pathlib import Path
 
 @dataclass
 class Options:
-    """federated Tables 2–3 on GradualFault-v0 (Scheme 1, Scheme 2, the adaptive federated filter)."""
+    """federated Tables 2–3 on GradualFault (Scheme 1, Scheme 2, the adaptive federated filter)."""
 
     out: Path = Path("federated.md")
     """Markdown file to write (a folder: <out>/federated.md); raw numbers go beside it as .json."""
     seeds: int = 16
     """Test seeds (1_000_000 …), at least 2."""
+    version: int = 1
+    """Benchmark version of the task: 1 (GradualFault-v1) or 0 (the frozen GradualFault-v0)."""
 
 
 def run(opts: Options) -> int:
@@ -21,7 +23,7 @@ def run(opts: Options) -> int:
     from swarmloc.bench.reproduce.federated import reproduce_federated
 
     try:
-        path = reproduce_federated(opts.out, opts.seeds)
+        path = reproduce_federated(opts.out, opts.seeds, opts.version)
     except ValueError as err:
         print(f"error: {err}")
         return 2
