@@ -154,3 +154,33 @@ def test_spec_rejects_inconsistent_vo_and_alignment():
 def test_ci_ekf_runs_through_the_runner_with_vo():
     metrics, _ = rollout(load_method("ci-ekf"), get_spec(TASK, duration=8.0), [1_000_000])
     assert metrics[0]["rmse"] < 2.0 and metrics[0]["anomaly_detection_rate"] is None
+
+
+def test_odometry_refinement_reaches_scipy_least_squares_optimum_with_noise_and_gaps():
+    """The block-accumulated normal equations solve the same problem as a generic solver."""
+    from scipy.optimize import least_squares
+
+    rng = np.random.default_rng(7)
+    K, N, sigma, sigma_z = 12, 9, 0.1, 1.0
+    p = rng.uniform(-10, 10, (N, 3))
+    p[0] = 0.0
+    disp = np.cumsum(rng.normal(0, 0.3, (K, N, 3)), axis=0)
+    disp[0] = 0.0
+    q = p[None] + disp
+    D = np.linalg.norm(q[:, :, None] - q[:, None], axis=-1) + rng.normal(0, sigma, (K, N, N))
+    D[rng.random(D.shape) < 0.3] = np.nan  # dropped ranges
+    guess = p + rng.normal(0, 0.5, p.shape)
+    guess[0] = 0.0
+    fit, cost = refine_with_odometry(guess, D, disp, sigma, sigma_z, 100)
+
+    k, i, j = np.nonzero(np.isfinite(D) & ~np.eye(N, dtype=bool)[None])
+
+    def residuals(x):
+        pos = np.vstack([np.zeros(3), x.reshape(N - 1, 3)])
+        qq = pos[None] + disp
+        ranges = np.linalg.norm(qq[k, i] - qq[k, j], axis=-1)
+        return np.r_[(ranges - D[k, i, j]) / sigma, pos[1:, 2] / sigma_z]
+
+    ref = least_squares(residuals, guess[1:].ravel(), xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    np.testing.assert_allclose(fit[1:].ravel(), ref.x, atol=1e-6)
+    assert cost == pytest.approx(2 * ref.cost, rel=1e-9)

@@ -83,33 +83,43 @@ def refine_with_odometry(p0: np.ndarray, D: np.ndarray, disp: np.ndarray, sigma:
     K, N = D.shape[:2]
     k, i, j = np.nonzero(np.isfinite(D) & ~np.eye(N, dtype=bool)[None])
     d = D[k, i, j]
+    ki, kj = k * N + i, k * N + j  # rows of the flattened (K·N, 3) positions
     p = p0.copy()
 
+    def offsets(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = (pos[None] + disp).reshape(K * N, 3)
+        u = q[ki] - q[kj]
+        return u, np.maximum(np.sqrt(np.einsum("md,md->m", u, u)), 1e-9)
+
     def residuals(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        q = pos[None] + disp  # (K, N, 3)
-        u = q[k, i] - q[k, j]
-        dist = np.maximum(np.linalg.norm(u, axis=-1), 1e-9)
+        u, dist = offsets(pos)
         return (dist - d) / sigma, u / dist[:, None]
 
     def cost(pos: np.ndarray) -> float:
-        r, _ = residuals(pos)
+        r = (offsets(pos)[1] - d) / sigma
         return float(r @ r + np.sum((pos[1:, 2] / altitude_sigma) ** 2))
 
     c = cost(p)
     mu = 1e-3
     n_u = 3 * (N - 1)
+    # a range's Jacobian row is +gᵀ/σ on pᵢ and −gᵀ/σ on pⱼ (g the unit vector from j to i), so
+    # JᵀJ is a sum of ±g gᵀ/σ² blocks at (i, i), (j, j), (i, j), (j, i) and Jᵀr of ±g r/σ at i and j:
+    # accumulated per block instead of through the dense (ranges × 3N) Jacobian
+    pair = i * N + j
+    z_cols = 3 * np.arange(N - 1) + 2  # altitude prior rows zᵢ / σ_z act on these unknowns alone
     for _ in range(iters):
         r, g = residuals(p)
-        J = np.zeros((r.size, N, 3))
-        rows = np.arange(r.size)
-        J[rows, i] += g / sigma
-        J[rows, j] -= g / sigma
-        J = J[:, 1:].reshape(r.size, n_u)
-        # altitude prior rows: zᵢ / σ_z
-        Jz = np.zeros((N - 1, n_u))
-        Jz[np.arange(N - 1), 3 * np.arange(N - 1) + 2] = 1.0 / altitude_sigma
-        A = J.T @ J + Jz.T @ Jz
-        b = J.T @ r + Jz.T @ (p[1:, 2] / altitude_sigma)
+        gg = (g[:, :, None] * g[:, None, :]).reshape(-1, 9) / sigma**2
+        # C[a, b] = Σ g gᵀ/σ² over the ranges measured by a to b
+        C = np.stack([np.bincount(pair, gg[:, e], N * N) for e in range(9)], axis=-1).reshape(N, N, 3, 3)
+        blocks = -(C + C.transpose(1, 0, 2, 3))  # (a, b) ← −C[a, b] − C[b, a] (each block symmetric)
+        blocks[np.arange(N), np.arange(N)] = C.sum(axis=1) + C.sum(axis=0)
+        A = blocks.transpose(0, 2, 1, 3).reshape(3 * N, 3 * N)[3:, 3:]
+        gr = g * (r / sigma)[:, None]
+        b = np.stack([np.bincount(i, gr[:, e], N) - np.bincount(j, gr[:, e], N) for e in range(3)], axis=-1)
+        b = b[1:].reshape(n_u)
+        A[z_cols, z_cols] += 1.0 / altitude_sigma**2
+        b[z_cols] += p[1:, 2] / altitude_sigma**2
         while True:
             # (JᵀJ + μ diag(JᵀJ)) δ = −Jᵀ r
             delta = np.linalg.solve(A + mu * np.diag(np.diag(A) + 1e-9), -b)
