@@ -37,12 +37,12 @@ from typing import Literal
 
 import numpy as np
 
-from swarmloc.envs.channels import PEER
+from swarmloc.envs.channels import ANCHOR, GPS, KIND_NAMES, LANDMARK, PEER, TDOA
 
 from .federated import imu_prediction
 from .fusion import chi2_soft_weight, ci_fuse
 from .init.initializer import InitConfig, MdsMapInitializer
-from .protocols import EstimatorOutput, Measurements, TaskFacts
+from .protocols import EstimatorOutput, Measurements, TaskFacts, UnsupportedTask
 
 D = 6
 _W_MIN = 1e-12  # the smallest weight: R ≤ 10¹² R, a range that is effectively ignored
@@ -196,13 +196,22 @@ class CiEkfEstimator:
         """Start B episodes.
 
         Raises:
-            ValueError: the task has no peer ranges, or ``x0`` is malformed.
+            UnsupportedTask: the task has no peer ranges, or it has absolute references
+                (anchors, TDOA, landmarks, GPS): the CI-EKF estimates in dtvirm's relative frame
+                from peer ranges and VO alone, so its positions are not the task's world frame.
+            ValueError: ``x0`` is malformed.
         """
         cfg = self.config
         kind = np.asarray(facts.kind)
         self._peer = (kind == PEER) & np.asarray(facts.linked)
         if not self._peer.any():
-            raise ValueError(f"the CI-EKF fuses peer ranges; task {facts.task_id} has none")
+            raise UnsupportedTask(f"the CI-EKF fuses peer ranges; task {facts.task_id} has none")
+        absolute = sorted({KIND_NAMES[k] for k in np.unique(kind) if k in (ANCHOR, TDOA, LANDMARK, GPS)})
+        if absolute:
+            raise UnsupportedTask(
+                f"the CI-EKF is anchor-free: it estimates in dtvirm's relative frame (UAV 0's first position is the "
+                f"origin) from peer ranges and VO alone, while task {facts.task_id} has absolute references "
+                f"({', '.join(absolute)}) and scores world-frame positions")
         x0 = np.asarray(x0, dtype=np.float64)
         B, N = facts.batch_size, facts.n_uav
         if x0.shape != (B, N, D):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from swarmloc.agents.ci_ekf import CiEkfConfig, CiEkfEstimator, ci_ekf, ci_ekf_no_aa, range_update, velocity_update
-from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
+from swarmloc.agents.protocols import Measurements, TaskFacts, UnsupportedTask, episode_keys
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
@@ -122,8 +122,11 @@ def test_bad_config_and_tasks_are_rejected():
         CiEkfConfig(aa_confidence=1.0)
     with pytest.raises(ValueError, match="init"):
         CiEkfConfig(init="gps")  # type: ignore[arg-type]
-    spec = get_spec("GradualFault-v0")
-    world = World(spec, 1)
-    facts = TaskFacts.from_spec(spec, world.layout, world.reset([0]), episode_keys([0]))
-    with pytest.raises(ValueError, match="peer ranges"):
-        CiEkfEstimator().reset(facts, facts.x0)
+    for task, why in (("GradualFault-v0", "fuses peer ranges; task swarmloc/GradualFault-v0 has none"),
+                      ("Scale8-v1", r"anchor-free: .* task swarmloc/Scale8-v1 has absolute references \(anchor\)"),
+                      ("Indoor-v1", r"absolute references \(landmark\)")):
+        spec = get_spec(task)
+        world = World(spec, 1)
+        facts = TaskFacts.from_spec(spec, world.layout, world.reset([0]), episode_keys([0]), anchors=world.anchors)
+        with pytest.raises(UnsupportedTask, match=why):
+            CiEkfEstimator().reset(facts, facts.x0)
