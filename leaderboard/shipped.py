@@ -25,6 +25,13 @@ from swarmloc.leaderboard.submit import submit
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 #: the shipped results of each suite
 RESULTS_DIRS: dict[str, Path] = {DEFAULT_SUITE: RESULTS_DIR / DEFAULT_SUITE, "standard-v0": RESULTS_DIR}
+#: shipped reference methods without standard-v1 results, and why (every other one has them)
+WITHOUT_V1_RESULTS: dict[str, str] = {
+    "oracle-v0": "the oracle of fault labels v0, the reference of the frozen v0 score (standard-v0 only)",
+    "ci-ekf": "anchor-free (dtvirm): every standard-v1 task has absolute references, so it runs none of them "
+              "(it runs AnchorFree-v0)",
+    "ci-ekf-no-aa": "as ci-ekf",
+}
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ import pytest
 
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.suites import get_suite
-from swarmloc.leaderboard.shipped import RESULTS_DIRS, load_shipped, shipped_results
-from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.shipped import RESULTS_DIRS, WITHOUT_V1_RESULTS, load_shipped, shipped_results
+from swarmloc.leaderboard.store import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 
 FILES = shipped_results()
 
@@ -27,6 +27,13 @@ def test_shipped_file_matches_the_current_suite(path):
     assert results.suite.sha256 == suite.sha256, \
         f"stale: regenerate with python -m swarmloc.leaderboard.shipped --suite {suite_name} --regenerate"
     assert {(e.task, e.seed) for e in results.episodes} == set(suite.episodes)
+
+
+def test_every_shipped_method_has_standard_v1_results_or_a_stated_reason():
+    on_v1 = {p.stem for p in shipped_results(RESULTS_DIRS["standard-v1"])}
+    methods = {m for m in SHIPPED_REFERENCE_METHODS if not m.endswith("+smooth")}
+    assert on_v1 == methods - set(WITHOUT_V1_RESULTS)
+    assert set(WITHOUT_V1_RESULTS) <= methods
 
 
 def test_both_suites_are_shipped():
