@@ -243,7 +243,7 @@ def _render(suite: Suite, methods: list[str], real: dict, simulated: dict, diagn
         rows.append([f"`{_short(t)}`"] + [_fmt(col.get(m, {}).get(t)) for m in HEADLINE]
                     + [f"`{best}` {_fmt(fair[best])}" if best else "—", check])
     lines += markdown_table(["flight"] + [f"{m} [m]" for m in HEADLINE] + ["best non-privileged [m]", "criterion"],
-                            rows, "lrrrrll")
+                            rows, "l" + "r" * len(HEADLINE) + "ll")
     if twr_v0 is not None and "swarmloc/UTILFlight-v1" in tasks:
         v1 = col.get("uniform", {}).get("swarmloc/UTILFlight-v1")
         lines += ["", (f"The TWR flight with Vicon-frame anchors (`UTILFlight-v1`): uniform {_fmt(v1)} m, beside "
