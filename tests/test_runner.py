@@ -167,3 +167,19 @@ def test_unsupported_task_gives_null_metrics(monkeypatch):
     out = evaluate_task(["needs-gps"], get_spec("swarmloc/Ideal-v0", duration=0.5), [1, 2])
     assert out.unsupported["needs-gps"].endswith("this estimator needs GPS")
     assert all(v is None for m in out.episodes["needs-gps"] for v in m.values())
+
+
+def test_rollouts_run_numba_and_torch_on_one_thread_and_restore_them():
+    import numba
+    import torch
+
+    from swarmloc.bench.evaluation.runner import single_threaded_kernels
+
+    before = numba.get_num_threads(), torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        with single_threaded_kernels():
+            assert numba.get_num_threads() == 1 and torch.get_num_threads() == 1
+        assert torch.get_num_threads() == 2 and numba.get_num_threads() == before[0]
+    finally:
+        torch.set_num_threads(before[1])

@@ -6,12 +6,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-#: the demo's default comparison: every classical link-trust baseline, the oracle, the
-#: learned MAPPO trust and one estimator per family that runs on every task, so that the
-#: main job stays within five minutes on a 2-core machine. The task-specific estimators
-#: (IMM, federated, CI-EKF, the other PFs) are on the leaderboard and one flag away.
-DEMO_METHODS = ("uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "random",
-                "mappo", "dead-reckoning", "pf", "oracle")
+#: the demo's default comparison: every classical link-trust baseline (one-step gates,
+#: sequential detection, integrity monitoring), the oracle, the learned trust (the paper's
+#: MAPPO and the learned reference) and one estimator per family that runs on every task,
+#: so that the main job stays within five minutes on a 2-core machine. The task-specific
+#: estimators (IMM, federated, CI-EKF, the other PFs) are on the leaderboard and one flag away.
+DEMO_METHODS = ("uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "random",
+                "mappo", "mappo-set-gru", "dead-reckoning", "pf", "oracle")
 
 
 @dataclass
