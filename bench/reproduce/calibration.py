@@ -14,7 +14,8 @@ information bound ``bound_rmse`` per episode), and the report gives per task
   split is measurably harder for uniform and the best classical method (non-overlapping CIs
   of the task means: the splits are different episodes, so nothing pairs);
 * the gap closed (score v1) of every method evaluated here and of every registered method
-  whose shipped results (``leaderboard/results``) hold these tasks and seeds.
+  whose shipped results (the suite's folder, ``leaderboard/results/standard-v1``) hold these
+  tasks and seeds.
 
 The phenomena that need more than the runner's metrics get it from the runner too:
 ``uniform`` re-run per seed with its trace (``rollout``; an episode's metrics do not depend
@@ -330,10 +331,11 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         workers: worker processes of the runner.
         overrides: task-spec overrides (shortened episodes in tests: not the suite's numbers, and the
             shipped results are then not compared).
-        results_dir: the shipped results (default ``leaderboard/results``).
+        results_dir: the shipped results (default: the standard-v1 ones, ``leaderboard/results/standard-v1``).
         progress: show the runner's progress bar.
     """
-    from swarmloc.leaderboard.shipped import RESULTS_DIR
+    from swarmloc.leaderboard.ranking import DEFAULT_SUITE
+    from swarmloc.leaderboard.shipped import RESULTS_DIRS
 
     short = [t for t in tasks if len(seeds[t]) < 2]
     if short:
@@ -353,19 +355,29 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         for m, rows in ev.episodes.items():
             methods[m]["episodes"] += [{"task": t, "seed": s, "metrics": r} for s, r in zip(ev.seeds, rows)]
     shipped: dict[str, Any] = {}
+    folder = Path(results_dir) if results_dir is not None else RESULTS_DIRS[DEFAULT_SUITE]
     if not overrides:
         reference = {(t, s): r for t, ev in evidence.items() for s, r in zip(ev.seeds, ev.episodes["uniform"])}
-        shipped = shipped_episodes(results_dir or RESULTS_DIR, tasks, seeds, reference, skip=list(methods))
+        shipped = shipped_episodes(folder, tasks, seeds, reference, skip=list(methods))
         methods.update({m: {"source": "shipped", **v} for m, v in shipped.items()})
     n_episodes = sum(len(seeds[t]) for t in tasks)
     return {
         "tasks": results, "families": families, "splits": split_comparison(results),
         "headroom": C.headroom_overall(fault), "gap_closed": gap_closed_table(methods, tasks),
-        "shipped_methods": sorted(shipped), "overrides": dict(overrides or {}),
+        "shipped_methods": sorted(shipped), "shipped_dir": _shown_path(folder), "overrides": dict(overrides or {}),
         "unsupported": {t: dict(o.unsupported) for t, o in outcomes.items() if o.unsupported},
         "timing": {"wall_s": wall, "episodes": n_episodes, "per_task_s": wall / len(tasks),
                    "per_task_seed_s": wall / n_episodes},
     }
+
+
+def _shown_path(folder: Path) -> str:
+    """``folder`` relative to the repository root where it lies inside it (as the report shows it)."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        return Path(folder).resolve().relative_to(root).as_posix()
+    except ValueError:
+        return str(folder)
 
 
 def plain(value: Any) -> Any:
@@ -414,8 +426,10 @@ def reproduce_calibration(suite: str = "standard-v1", tasks: Sequence[str] | str
     if seeds is not None and not 2 <= seeds <= available:
         raise ValueError(f"seeds must be in [2, {available}] (the suite's seeds per task), got {seeds}")
     by_task = {t: chosen.seeds(t)[:seeds] for t in chosen.tasks}
-    raw = calibrate(chosen.tasks, by_task, workers=workers, overrides=overrides, results_dir=results_dir,
-                    progress=progress)
+    from swarmloc.leaderboard.shipped import RESULTS_DIRS
+
+    raw = calibrate(chosen.tasks, by_task, workers=workers, overrides=overrides,
+                    results_dir=results_dir if results_dir is not None else RESULTS_DIRS.get(suite), progress=progress)
     # one sanitized record behind both files, so that the Markdown and the JSON agree
     raw = plain({"command": command, "suite": {"name": suite, "selection": chosen.name, "sha256": chosen.sha256},
                  "provenance": collect_provenance().model_dump(mode="json"), **raw})

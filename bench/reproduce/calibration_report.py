@@ -170,9 +170,10 @@ def _gap_closed(raw: Mapping[str, Any]) -> list[str]:
     rows = [[m + (" (privileged)" if e["privileged"] else ""), e["source"], _num(e["suite"], 2),
              f"{e['with_gap']}/{e['covered']}"] + [_num(e["families"][f], 2) for f in families]
             for m, e in table.items()]
-    note = (f"Shipped results (`leaderboard/results`) cover these tasks and seeds for: "
+    where = raw.get("shipped_dir", "leaderboard/results")
+    note = (f"Shipped results (`{where}`) cover these tasks and seeds for: "
             f"{', '.join(raw['shipped_methods'])}." if raw["shipped_methods"] else
-            "No shipped results (`leaderboard/results`) cover these tasks and seeds"
+            f"No shipped results (`{where}`) cover these tasks and seeds"
             + (" (shortened episodes are never compared with them)" if raw["overrides"] else "")
             + ": only the classical methods evaluated here are shown.")
     return (["## Gap closed (score v1)", "",
