@@ -127,7 +127,9 @@ def reference_entry(entries: Iterable[LeaderboardEntry]) -> LeaderboardEntry | N
 
 def fill_uniform_rmse(episodes: Sequence[Mapping[str, Any]],
                       reference: Mapping[tuple[str, int], float | None]) -> tuple[list[dict[str, Any]], int]:
-    """Episodes with a missing ``uniform_rmse`` filled from the reference's RMSE on the same (task, seed).
+    """Episodes with an RMSE but no ``uniform_rmse`` filled from the reference's RMSE on the same (task, seed).
+
+    An episode the method did not run (no RMSE) has no gain either way and is left as it is.
 
     Args:
         episodes: results-file episodes (``{"task", "seed", "metrics"}``).
@@ -139,7 +141,7 @@ def fill_uniform_rmse(episodes: Sequence[Mapping[str, Any]],
     out, filled = [], 0
     for ep in episodes:
         metrics = ep["metrics"]
-        if metrics.get("uniform_rmse") is None:
+        if metrics.get("uniform_rmse") is None and metrics.get("rmse") is not None:
             rmse = reference.get((ep["task"], int(ep["seed"])))
             if rmse is not None:
                 metrics = {**metrics, "uniform_rmse": rmse}
