@@ -110,7 +110,8 @@ def stacked_header(label: str, width: int = HEADER_WIDTH) -> str:
     return "\n".join(lines)
 
 
-def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_tasks: int, ranked: bool) -> Table:
+def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_tasks: int, ranked: bool,
+                coverage: bool = True) -> Table:
     # SIMPLE_HEAD draws a space between columns; no padding beside it, so seven families fit TERMINAL_WIDTH.
     table = Table(header_style="bold", box=box.SIMPLE_HEAD, padding=0, show_edge=False)
     number: dict[str, Any] = {"justify": "right", "no_wrap": True}
@@ -121,7 +122,8 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
     table.add_column(Text("2^S"), **number)
     table.add_column(Text("95% CI"), **number)
     table.add_column(Text("Gap"), **number)
-    table.add_column(Text("Tasks"), **number)
+    if coverage:  # the ranked table holds full coverage only: its k/T column would repeat T/T
+        table.add_column(Text("Tasks"), **number)
     for column in columns:
         # Text, not str: rich would read "[...]" in a submitted task ID as markup.
         table.add_column(Text(stacked_header(column.header)), **number)
@@ -132,7 +134,7 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
         ci = "—" if score is None else "–".join(fmt_times(x) for x in score.times_ci)
         cells += [Text(standing.entry.name), Text(standing.entry.track),
                   Text(fmt_times(score.times if score else None)), Text(ci),
-                  Text(fmt_pct(score.gap_closed if score else None)), Text(f"{k}/{n}")]
+                  Text(fmt_pct(score.gap_closed if score else None))] + ([Text(f"{k}/{n}")] if coverage else [])
         for column in columns:
             cs = column_score(score, column)
             cells.append(Text("—" if cs is None else fmt_times(cs.times) + ("" if cs.covered == cs.total else "*")))
@@ -167,9 +169,10 @@ def board_tables(board: SuiteBoard, family: str | None = None,
     n = len(board.tasks)
     suite = f"{board.name} v{board.version}"
     # titles as their own lines: a table title would wrap at the (narrower) table's width
-    out: list[Table | Text] = [Text(f"swarmloc leaderboard — suite {suite} (ranked by score v1, 2^S)", style="bold")]
+    out: list[Table | Text] = [Text(f"swarmloc leaderboard — suite {suite} (ranked by score v1, 2^S; covering all "
+                                    f"{n} tasks)", style="bold")]
     if board.ranked:
-        out.append(_rich_table(board.ranked, columns, n, ranked=True))
+        out.append(_rich_table(board.ranked, columns, n, ranked=True, coverage=False))
     else:
         out.append(Text("No ranked methods: none has a score v1 on every task of the suite.", style="italic"))
     if board.partial:

@@ -141,6 +141,9 @@ def test_terminal_view_columns_and_legend(store: LeaderboardStore) -> None:
     assert "Partial coverage on tiny v1" in text and text.index("Partial coverage") < text.index("quarter-no-step")
     assert text.index("Privileged methods") < text.index("oracle")
     assert "2/3" in text and "3/3" in text
+    # the ranked table holds full coverage only, so it has no k/T column; the partial one does
+    ranked_header = next(line for line in text.splitlines() if line.lstrip().startswith("# Method"))
+    assert "Tasks" not in ranked_header and "covering all 3 tasks" in text
     assert "4.00" in text  # quarter-no-step covers NLOS-v0 only of its family: 2^2 with a star
     assert "4.00*" in text
     assert "taken from the stored uniform entry" in text
