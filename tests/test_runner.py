@@ -169,17 +169,16 @@ def test_unsupported_task_gives_null_metrics(monkeypatch):
     assert all(v is None for m in out.episodes["needs-gps"] for v in m.values())
 
 
-def test_rollouts_run_numba_and_torch_on_one_thread_and_restore_them():
-    import numba
-    import torch
 
-    from swarmloc.bench.evaluation.runner import single_threaded_kernels
+def test_pool_workers_run_numba_and_torch_on_one_thread():
+    import subprocess
+    import sys
 
-    before = numba.get_num_threads(), torch.get_num_threads()
-    torch.set_num_threads(2)
-    try:
-        with single_threaded_kernels():
-            assert numba.get_num_threads() == 1 and torch.get_num_threads() == 1
-        assert torch.get_num_threads() == 2 and numba.get_num_threads() == before[0]
-    finally:
-        torch.set_num_threads(before[1])
+    code = ("import numba, os, torch\n"
+            "from swarmloc.bench.evaluation.backends import worker_init\n"
+            "torch.set_num_threads(2)\n"
+            "worker_init()\n"
+            "assert numba.get_num_threads() == 1 and torch.get_num_threads() == 1, torch.get_num_threads()\n"
+            "assert os.environ['OMP_NUM_THREADS'] == '1'\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr

@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
@@ -181,27 +180,21 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
 
 @contextlib.contextmanager
 def single_threaded_kernels() -> Iterator[None]:
-    """Run numba kernels, and torch if a method has loaded it, on one thread inside the block
-    (restored afterwards).
+    """Run numba kernels on one thread inside the block (restored afterwards).
 
     The runner's batches are small (B = seeds per task): thread launches cost more than
-    they save, and on a busy machine spinning threads slow everything down tenfold (two
-    worker processes with torch's default threads ran `mappo` on quick-v1 4.4× slower than
-    one process). Parallelism comes from worker processes instead.
+    they save, and on a busy machine spinning threads slow everything down tenfold.
+    Parallelism comes from worker processes instead (whose torch, if a method loads it,
+    runs one thread: ``backends.worker_init``).
     """
     import numba
 
-    torch = sys.modules.get("torch")
-    previous = numba.get_num_threads(), (torch.get_num_threads() if torch is not None else None)
+    previous = numba.get_num_threads()
     numba.set_num_threads(1)
-    if torch is not None:
-        torch.set_num_threads(1)
     try:
         yield
     finally:
-        numba.set_num_threads(previous[0])
-        if torch is not None:
-            torch.set_num_threads(previous[1])
+        numba.set_num_threads(previous)
 
 
 def rollout(loaded: LoadedMethod, spec: TaskSpec, seeds: Sequence[int],
