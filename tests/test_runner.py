@@ -174,11 +174,10 @@ def test_pool_workers_run_numba_and_torch_on_one_thread():
     import subprocess
     import sys
 
-    code = ("import numba, os, torch\n"
+    code = ("import numba, torch\n"
             "from swarmloc.bench.evaluation.backends import worker_init\n"
             "torch.set_num_threads(2)\n"
             "worker_init()\n"
-            "assert numba.get_num_threads() == 1 and torch.get_num_threads() == 1, torch.get_num_threads()\n"
-            "assert os.environ['OMP_NUM_THREADS'] == '1'\n")
+            "assert numba.get_num_threads() == 1 and torch.get_num_threads() == 1, torch.get_num_threads()\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr

@@ -180,8 +180,7 @@ def worker_init() -> None:
     import numba
 
     numba.set_num_threads(1)
-    os.environ["OMP_NUM_THREADS"] = "1"
-    torch = sys.modules.get("torch")  # already imported while the worker unpickled its first task
+    torch = sys.modules.get("torch")  # imported while the worker unpickled its first task
     if torch is not None:
         torch.set_num_threads(1)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
