@@ -184,8 +184,8 @@ def single_threaded_kernels() -> Iterator[None]:
 
     The runner's batches are small (B = seeds per task): thread launches cost more than
     they save, and on a busy machine spinning threads slow everything down tenfold.
-    Parallelism comes from worker processes instead (whose torch, if a method loads it,
-    runs one thread: ``backends.worker_init``).
+    Parallelism comes from worker processes instead (``backends.worker_init`` sets torch to
+    one thread where the worker has imported it before its first job).
     """
     import numba
 
