@@ -188,7 +188,8 @@ def test_labels_v1_batched_equal_single():
 
 
 def test_oracle_v0_reproduces_shipped_episodes_exactly():
-    """The v0 numbers are untouched: ``oracle-v0`` gives the shipped oracle-v0.json episodes bit for bit.
+    """The v0 numbers are untouched: ``oracle-v0`` gives the shipped oracle-v0.json episodes bit for bit
+    (their v1 ``bound_rmse`` to 1e-12).
 
     (That file is the former oracle.json re-evaluated; its episodes equal the old ones except the last bit
     of delay and energy, from the recorder's batch-independent average.)"""
@@ -200,7 +201,11 @@ def test_oracle_v0_reproduces_shipped_episodes_exactly():
     episodes = [("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/CascadedFault-v0", 1_000_003),
                 ("swarmloc/CascadedFaultRandom-v0", 1_000_001), ("swarmloc/GradualFault-v0", 1_000_002)]
     for got in run_episodes("oracle-v0", episodes):
-        want = shipped[(got["task"], got["seed"])]
+        want = dict(shipped[(got["task"], got["seed"])])
+        # the information bound is not a v0 number: its dense products go through BLAS (numba's `@`),
+        # whose kernels are chosen per CPU, so its last bits differ between CPU models (measured on
+        # GradualFault-v0 with 27×27 blocks: 0.8110501013453439 on AMD EPYC against the shipped …476)
+        assert got["metrics"]["bound_rmse"] == pytest.approx(want.pop("bound_rmse"), rel=1e-12), got["task"]
         assert {k: got["metrics"][k] for k in want} == want, got["task"]
 
 
