@@ -169,21 +169,34 @@ def run_jobs(fn: JobFunction, jobs: Sequence[Job], *, backend: Backend = "serial
 # --------------------------------------------------------------------------- process
 
 
+#: set by ``worker_init``: this process is a worker of the process pool
+_POOL_WORKER = False
+
+
 def worker_init() -> None:
-    """Spawned workers run numba, and torch when a method loads it, single-threaded (the
+    """Spawned workers run numba, and torch where a job loads it, single-threaded (the
     parallelism is across jobs) and leave Ctrl-C to the parent, which stops them.
 
-    With torch's default threads, two workers ran `mappo` on quick-v1 4.4× slower than one
-    process. torch reads ``OMP_NUM_THREADS`` when it is first imported; where the worker
-    has imported it already, its thread count is set directly.
+    With torch's default threads (one per core), two workers running `mappo` each spin two
+    OpenMP threads on two cores: quick-v1 ran 4.4× slower than in one process. A worker
+    imports torch only when its first job loads a method that uses it, so its thread count
+    is set then, by ``pin_torch_threads``, once and never switched back.
     """
+    global _POOL_WORKER
     import numba
 
+    _POOL_WORKER = True
     numba.set_num_threads(1)
-    torch = sys.modules.get("torch")  # imported while the worker unpickled its first task
-    if torch is not None:
-        torch.set_num_threads(1)
+    pin_torch_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def pin_torch_threads() -> None:
+    """In a pool worker, put torch on one thread if a job has imported it (a no-op elsewhere, and
+    after the first time). Call it after loading a method and before running it."""
+    torch = sys.modules.get("torch")
+    if _POOL_WORKER and torch is not None and torch.get_num_threads() != 1:
+        torch.set_num_threads(1)
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:

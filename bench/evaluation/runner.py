@@ -44,7 +44,16 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench.evaluation import metrics as M
-from swarmloc.bench.evaluation.backends import BACKENDS, MAX_WORKERS, Backend, Job, JobFailure, check_backend, run_jobs
+from swarmloc.bench.evaluation.backends import (
+    BACKENDS,
+    MAX_WORKERS,
+    Backend,
+    Job,
+    JobFailure,
+    check_backend,
+    pin_torch_threads,
+    run_jobs,
+)
 from swarmloc.bench.evaluation.bounds import episode_bounds
 from swarmloc.bench.evaluation.outcomes import (
     EvaluationFailed,
@@ -184,8 +193,8 @@ def single_threaded_kernels() -> Iterator[None]:
 
     The runner's batches are small (B = seeds per task): thread launches cost more than
     they save, and on a busy machine spinning threads slow everything down tenfold.
-    Parallelism comes from worker processes instead (``backends.worker_init`` sets torch to
-    one thread where the worker has imported it before its first job).
+    Parallelism comes from worker processes instead (``backends.pin_torch_threads`` puts
+    torch on one thread in a pool worker once a job has loaded it).
     """
     import numba
 
@@ -257,6 +266,7 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
     weights = weights or {}
     for text in methods:
         loaded = load_method(text, weights.get(text))
+        pin_torch_threads()  # a pool worker's first torch method has just imported torch
         started = time.process_time()
         try:
             metrics, tr = rollout(loaded, spec, seeds, trace=trace)
