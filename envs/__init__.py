@@ -13,8 +13,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from .registration import register_tasks
-from .tasks import CATALOGUE, UnknownTaskError, canonical_task_id, get_spec
+from .kernel_cache import guard_kernel_cache
+
+guard_kernel_cache()  # before any numba kernel loads from its disk cache (see kernel_cache)
+
+from .registration import register_tasks  # noqa: E402
+from .tasks import CATALOGUE, UnknownTaskError, canonical_task_id, get_spec  # noqa: E402
 
 TASK_IDS: tuple[str, ...] = tuple(register_tasks())
 
