@@ -169,30 +169,30 @@ def test_unsupported_task_gives_null_metrics(monkeypatch):
     assert all(v is None for m in out.episodes["needs-gps"] for v in m.values())
 
 
+def _python_ok(code: str) -> None:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
 
 def test_pool_workers_run_numba_and_torch_on_one_thread():
     """A worker starts without torch; a job's method imports it, the runner pins it to one thread.
     Outside a pool worker (this test process, the parent) the thread count is left alone."""
-    import subprocess
-    import sys
-
-    code = ("import sys, numba\n"
-            "from swarmloc.bench.evaluation.backends import pin_torch_threads, worker_init\n"
-            "worker_init()\n"
-            "assert numba.get_num_threads() == 1 and 'torch' not in sys.modules\n"
-            "import torch\n"
-            "torch.set_num_threads(2)\n"
-            "pin_torch_threads()\n"
-            "assert torch.get_num_threads() == 1, torch.get_num_threads()\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    parent = ("import torch\n"
-              "from swarmloc.bench.evaluation.backends import pin_torch_threads\n"
-              "torch.set_num_threads(2)\n"
-              "pin_torch_threads()\n"
-              "assert torch.get_num_threads() == 2, torch.get_num_threads()\n")
-    done = subprocess.run([sys.executable, "-c", parent], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
+    _python_ok("import sys, numba\n"
+               "from swarmloc.bench.evaluation.backends import pin_torch_threads, worker_init\n"
+               "worker_init()\n"
+               "assert numba.get_num_threads() == 1 and 'torch' not in sys.modules\n"
+               "import torch\n"
+               "torch.set_num_threads(2)\n"
+               "pin_torch_threads()\n"
+               "assert torch.get_num_threads() == 1, torch.get_num_threads()\n")
+    _python_ok("import torch\n"
+               "from swarmloc.bench.evaluation.backends import pin_torch_threads\n"
+               "torch.set_num_threads(2)\n"
+               "pin_torch_threads()\n"
+               "assert torch.get_num_threads() == 2, torch.get_num_threads()\n")
 
 
 def test_evaluate_task_pins_torch_after_loading_the_method(monkeypatch):
