@@ -243,7 +243,10 @@ UTIL_TDOA_SIGMA = {"TDOA2": 0.15, "TDOA3": 0.20}
 #: of std e, which white noise at 10 ms steps matches with σ = e / √(1 s · 10 ms) = 10·e.
 #: c0607 (the Bolt): e = 0.13–0.16 m/s; c0426: 0.20–0.30 m/s; c0425: 0.41–1.29 m/s (its
 #: logged gyro z reads −0.06 … −0.09 rad/s at rest and its accelerometer 3.7° off level:
-#: the AHRS tilt is 7–10° off in flight, a horizontal bias of 1.2–1.9 m/s² in x)
+#: the AHRS tilt is 7–10° off in flight, a horizontal bias of 1.2–1.9 m/s² in x). A static gyro
+#: calibration does not help: subtracting the gyro mean of the rest before take-off (0.01–0.03
+#: rad/s per axis) makes the 1 s velocity error larger on all eight flights (c0426-traj15
+#: 0.20/0.22 → 0.34/0.34 m/s in x/y; c0425-traj14 y 0.66 → 2.94 m/s), so it is not applied
 UTIL_TDOA_IMU_SIGMA = {"c0425": 10.0, "c0426": 2.5, "c0607": 1.5}
 
 
