@@ -64,8 +64,10 @@ def kernel_sources(roots: Iterable[Path]) -> list[Path]:
     ``njit`` and every package module they import, transitively (numba freezes imported globals such
     as channel-kind constants into the compiled code, so their modules count too)."""
     named = {Path(r).name: Path(r) for r in roots}
+    this = Path(__file__).resolve()  # names njit in its prose only
     todo = [path for root in named.values() for path in sorted(root.rglob("*.py"))
-            if "__pycache__" not in path.parts and "njit" in path.read_text(encoding="utf-8")]
+            if "__pycache__" not in path.parts and path.resolve() != this
+            and "njit" in path.read_text(encoding="utf-8")]
     found: set[Path] = set()
     while todo:
         path = todo.pop()
@@ -92,7 +94,8 @@ def _files_signature(roots: list[Path], numba_version: str) -> str:
     for root in roots:
         for path in sorted(root.rglob("*.py")):
             st = path.stat()
-            digest.update(f"{root.name}/{path.relative_to(root).as_posix()}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+            name = f"{root.name}/{path.relative_to(root).as_posix()}"
+            digest.update(f"{name}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
     return digest.hexdigest()
 
 
