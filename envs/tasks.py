@@ -245,8 +245,10 @@ UTIL_TDOA_SIGMA = {"TDOA2": 0.15, "TDOA3": 0.20}
 #: logged gyro z reads −0.06 … −0.09 rad/s at rest and its accelerometer 3.7° off level:
 #: the AHRS tilt is 7–10° off in flight, a horizontal bias of 1.2–1.9 m/s² in x). A static gyro
 #: calibration does not help: subtracting the gyro mean of the rest before take-off (0.01–0.03
-#: rad/s per axis) makes the 1 s velocity error larger on all eight flights (c0426-traj15
-#: 0.20/0.22 → 0.34/0.34 m/s in x/y; c0425-traj14 y 0.66 → 2.94 m/s), so it is not applied
+#: rad/s per axis) makes the 1 s velocity error larger in x and y on the five c0426 flights
+#: (traj15 0.20/0.22 → 0.34/0.34 m/s), larger on the two c0425 ones (y 0.40 → 0.90 and
+#: 0.66 → 2.94 m/s against x 0.86 → 0.75 and 1.25 → 1.08) and leaves c0607 unchanged, so it
+#: is not applied
 UTIL_TDOA_IMU_SIGMA = {"c0425": 10.0, "c0426": 2.5, "c0607": 1.5}
 
 
