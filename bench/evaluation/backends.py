@@ -187,7 +187,6 @@ def worker_init() -> None:
 
     _POOL_WORKER = True
     numba.set_num_threads(1)
-    pin_torch_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
