@@ -12,7 +12,8 @@ merged in sample order and compared with the submitted ones as usual.
 Nodes read the method's files, weights and search path at the paths this process
 names (one node, or a shared file system), and need swarmloc and bubblewrap installed.
 A chunk whose Ray worker dies is retried (``max_retries``); a chunk whose re-run fails
-(crash, time-out, bad output, no sandbox) fails the verification with its message.
+(crash, time-out, bad output, no sandbox) fails the verification with its message, once
+every chunk has ended (the first failure's message).
 """
 
 from __future__ import annotations
@@ -70,35 +71,40 @@ def ray_rerun(address: str | None = None, num_cpus: int | None = None) -> Rerun:
     """
 
     def rerun(method: str, episodes: Sequence[tuple[str, int]], **options: Any) -> tuple[list[dict], float]:
-        from swarmloc.bench.evaluation.backends import MAX_RETRIES, connect_ray, import_ray
+        from swarmloc.bench.evaluation.backends import MAX_RETRIES, cancel_outstanding, connect_ray, import_ray
 
         ray = import_ray()
         started = connect_ray(address, num_cpus or os.cpu_count() or 1)
         began = time.perf_counter()
-        refs: list[Any] = []
+        pending: list[Any] = []
         try:
             chunks = split_sample(episodes, max(1, int(ray.cluster_resources().get("CPU", 1))))
             remote = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(_rerun_chunk)
-            refs = [remote.remote(method, chunk, options) for chunk in chunks]
+            pending = [remote.remote(method, chunk, options) for chunk in chunks]
             found: dict[tuple[str, int], dict] = {}
-            pending = list(refs)
+            failure: SubmissionError | None = None
+            # every chunk is awaited, also after one has failed: cancelling the others could abort
+            # this process (see ``cancel_outstanding``), and each chunk is bounded by its sandbox's limits
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
                 for ref in ready:
                     try:
                         ok, value = ray.get(ref)
                     except ray.exceptions.RayError as err:  # its Ray worker died more than MAX_RETRIES times, …
-                        raise VerificationFailed(f"the verification re-run on Ray failed: {err}") from err
+                        failure = failure or VerificationFailed(f"the verification re-run on Ray failed: {err}")
+                        continue
                     if not ok:
                         name, message = value
-                        raise getattr(errors, name, VerificationFailed)(message)
+                        failure = failure or getattr(errors, name, VerificationFailed)(message)
+                        continue
                     for episode in value[0]:
                         found[(str(episode["task"]), int(episode["seed"]))] = episode
+            if failure is not None:
+                raise failure
             wanted = [(str(t), int(s)) for t, s in episodes]
             return [found[key] for key in wanted if key in found], time.perf_counter() - began
         except BaseException:
-            for ref in refs:
-                ray.cancel(ref, force=True)
+            cancel_outstanding(pending)  # interrupted (Ctrl-C): stop the chunks still running
             raise
         finally:
             if started:

@@ -279,6 +279,24 @@ def connect_ray(address: str | None, num_cpus: int) -> bool:
     return True
 
 
+def cancel_outstanding(refs: Sequence[Any]) -> None:
+    """Force-cancel the Ray tasks of ``refs`` that have not finished; finished ones are left alone.
+
+    Ray 2.60's owner aborts (``Check failed: it != submissible_tasks_.end() Tried to
+    complete task that was not pending``, task_manager.cc) when a cancellation races with
+    the reply of a task that is finishing; the driver process dies with it. We saw it kill a
+    test process after a failed verification cancelled its sibling chunks. Skipping the
+    tasks whose result is already here narrows the window to a task whose reply is in
+    flight; callers cancel only when they must stop (Ctrl-C), never to end a run early.
+    """
+    if not refs:
+        return
+    ray = import_ray()
+    _, running = ray.wait(list(refs), num_returns=len(refs), timeout=0)
+    for ref in running:
+        ray.cancel(ref, force=True)
+
+
 def weights_bundle(path: str | os.PathLike[str]) -> dict[str, bytes]:
     """A weights file and the provenance record beside it (``<stem>.json``, which factories may read), by name."""
     path = Path(path)
@@ -348,8 +366,7 @@ def _run_ray(fn: JobFunction, jobs: list[Job], workers: int, weights: Mapping[st
                     continue
                 _report(job, outcome, on_result, on_failure)
     except BaseException:
-        for ref in list(by_ref):
-            ray.cancel(ref, force=True)
+        cancel_outstanding(list(by_ref))
         raise
     finally:
         if started:
@@ -362,6 +379,7 @@ __all__ = [
     "Backend",
     "Job",
     "JobFailure",
+    "cancel_outstanding",
     "check_backend",
     "connect_ray",
     "import_ray",
