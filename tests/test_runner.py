@@ -103,6 +103,51 @@ def test_parallel_workers_equal_serial():
         assert serial[name].episodes == parallel[name].episodes
 
 
+def test_a_suite_runs_each_reference_once_per_task_and_scores_as_evaluate_task(monkeypatch):
+    import swarmloc.bench.evaluation.runner as runner
+
+    ran: list[tuple[str, str, tuple[int, ...]]] = []
+    real_rollout = runner.rollout
+
+    def counting(loaded, spec, seeds, trace=False):
+        ran.append((loaded.name, spec.task_id, tuple(int(s) for s in seeds)))
+        return real_rollout(loaded, spec, seeds, trace)
+
+    monkeypatch.setattr(runner, "rollout", counting)
+    runner._REFERENCE_CACHE.clear()
+    short = {"duration": 8.0}
+    suite = Suite("tiny3", "0", (("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/NLOS-v0", 1_000_001),
+                                 ("swarmloc/CascadedFault-v0", 1_000_003)))
+    runs = evaluate_methods(["chi2-gate", "random", "uniform"], suite, seeds_per_job=1, trace=False,
+                            progress=False, overrides=short)
+    # one rollout per (method, chunk): uniform is shared with the evaluated method, oracle-v0 runs as its own job
+    assert sorted(ran) == sorted((m, t, (s,)) for t, s in suite.episodes
+                                 for m in ("chi2-gate", "random", "uniform", "oracle-v0"))
+    for task in suite.tasks:
+        alone = evaluate_task(["chi2-gate", "random", "uniform"], get_spec(task, **short), suite.seeds(task))
+        for m in ("chi2-gate", "random", "uniform"):
+            assert [e["metrics"] for e in runs[m].episodes if e["task"] == task] == alone.episodes[m]
+    assert all(e["metrics"]["uniform_rmse"] is not None for e in runs["random"].episodes)
+
+
+def test_a_failed_reference_fails_its_task_for_every_method(monkeypatch):
+    import swarmloc.bench.evaluation.runner as runner
+
+    real_rollout = runner.rollout
+
+    def broken_oracle(loaded, spec, seeds, trace=False):
+        if loaded.name == "oracle-v0" and spec.task_id == "swarmloc/NLOS-v0":
+            raise RuntimeError("no labels today")
+        return real_rollout(loaded, spec, seeds, trace)
+
+    monkeypatch.setattr(runner, "rollout", broken_oracle)
+    suite = Suite("tiny2", "0", (("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/Ideal-v0", 1_000_000)))
+    run = evaluate_methods(["random"], suite, trace=False, progress=False, overrides={"duration": 3.0})["random"]
+    assert list(run.failed) == ["swarmloc/NLOS-v0"]
+    assert run.failed["swarmloc/NLOS-v0"].startswith("the reference oracle-v0 failed on this task: RuntimeError")
+    assert [e["task"] for e in run.episodes] == ["swarmloc/Ideal-v0"]
+
+
 class _BadShape(DeadReckoning):
     def step(self, meas: Measurements) -> EstimatorOutput:
         return EstimatorOutput(positions=np.zeros((1, 2, 3)))

@@ -10,9 +10,10 @@ verifier re-run a sample with :func:`run_episodes`.
 
 **Normalized score (v0).** Each episode's score compares its RMSE with the RMSE of the two
 reference methods, ``uniform`` (score 0) and the privileged ``oracle-v0`` (score 1), run
-on the same (task, seed) on the fly (their runs are shared when they are evaluated too,
-and cached per process). Nothing precomputed is shipped, so a score is always
-consistent with the code that produced it.
+on the same (task, seed) on the fly. A suite evaluation runs each once per task chunk, as
+jobs of their own (or shares the evaluated methods' runs) and fills the scores in when the
+task is done; ``evaluate_task`` alone runs them itself, cached per process. Nothing
+precomputed is shipped, so a score is always consistent with the code that produced it.
 
 Privileged methods get the pending measurements' fault labels through
 ``observe_privileged`` before every ``act``/``step``; no other method ever does. A
@@ -247,7 +248,8 @@ def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[floa
 
 
 def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[int], *,
-                  weights: Mapping[str, str | None] | None = None, trace: bool = False) -> TaskOutcome:
+                  weights: Mapping[str, str | None] | None = None, trace: bool = False,
+                  references: bool = True) -> TaskOutcome:
     """Evaluate methods on one task's seeds (one batch per method), normalized scores included.
 
     Args:
@@ -256,6 +258,9 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
         seeds: the episode seeds.
         weights: optional method → weights file.
         trace: keep the trace of the first seed of each method.
+        references: run the references here (cached per process) and fill in
+            ``normalized_score`` and ``uniform_rmse``; False leaves both None for the caller
+            (``evaluate_methods`` runs each reference once per task, as a job of its own).
 
     Returns:
         The ``TaskOutcome``.
@@ -283,17 +288,30 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
             key = _spec_key(spec)
             for seed, m in zip(seeds, metrics):
                 _REFERENCE_CACHE[(text, key, seed)] = float(m["rmse"])  # type: ignore[arg-type]
-    uniform = reference_rmse(REFERENCE_UNIFORM, spec, seeds)
-    oracle = reference_rmse(REFERENCE_ORACLE, spec, seeds)
     # the information bound on the same scored steps and UAVs as ``rmse`` (cached per task spec and seed)
     bounds = [b.rmse for b in episode_bounds(spec, seeds)]
     for metrics in outcome.episodes.values():
-        for m, u, o, bound in zip(metrics, uniform, oracle, bounds):
+        for m, bound in zip(metrics, bounds):
+            if m["rmse"] is not None:
+                m["bound_rmse"] = bound
+    if references:
+        fill_references(outcome.episodes.values(), reference_rmse(REFERENCE_UNIFORM, spec, seeds),
+                        reference_rmse(REFERENCE_ORACLE, spec, seeds))
+    return outcome
+
+
+def fill_references(episodes: Any, uniform: Sequence[float], oracle: Sequence[float]) -> None:
+    """Fill in ``normalized_score`` (v0) and ``uniform_rmse`` (score v1's reference) of metrics dicts.
+
+    Args:
+        episodes: per method, one metrics dict per seed (an iterable of lists), changed in place.
+        uniform, oracle: the references' RMSE per seed, in the same order.
+    """
+    for metrics in episodes:
+        for m, u, o in zip(metrics, uniform, oracle, strict=True):
             if m["rmse"] is not None:
                 m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
                 m["uniform_rmse"] = u  # the reference of score v1 (swarmloc.bench.evaluation.score)
-                m["bound_rmse"] = bound
-    return outcome
 
 
 def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | None = None) -> list[dict]:
@@ -330,7 +348,8 @@ def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | No
 def _task_job(job: Job, weights: str | None) -> TaskOutcome:
     """The runner's job function (top level, so that workers unpickle it): one method on a chunk of seeds."""
     spec = get_spec(job.task, **(job.overrides or {}))
-    return evaluate_task([job.method], spec, job.seeds, weights={job.method: weights}, trace=job.trace)
+    return evaluate_task([job.method], spec, job.seeds, weights={job.method: weights}, trace=job.trace,
+                         references=False)
 
 
 def _task_cost(task: str, n_seeds: int) -> float:
@@ -405,8 +424,12 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     loaded = {m: load_method(m, weights.get(m)) for m in methods}  # fail fast, before any work
     require_data(suite)  # a recorded task whose data is not imported here: say so before any work
     # one job per (method, task, seed chunk): the workers balance methods of very different
-    # cost; the references of the normalized score are cached per worker process
-    jobs = make_jobs(methods, suite, seeds_per_job, trace, overrides)
+    # cost. The two references of the scores run once per chunk, as jobs of their own (or as
+    # the evaluated methods themselves), and are filled in here when a task's jobs are done
+    extra = [r for r in (REFERENCE_UNIFORM, REFERENCE_ORACLE) if r not in methods]
+    jobs = [job for j in make_jobs(methods, suite, seeds_per_job, trace, overrides)
+            for job in ([Job(j.task, r, j.seeds, False, overrides) for r in extra] if j.method == methods[0] else [])
+            + [j]]
     left = {task: sum(j.task == task for j in jobs) for task in suite.tasks}
     gathered = Gathered()
     label = methods[0] if len(methods) == 1 else f"{len(methods)} methods"
@@ -417,8 +440,10 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
         left[job.task] -= 1
         bar.update(1)
         bar.set_postfix_str(job.task.removeprefix("swarmloc/"))
-        if on_task is not None and left[job.task] == 0:
-            on_task(gathered.outcome(job.task, suite.seeds(job.task), methods))
+        if left[job.task] == 0:
+            _score_task(gathered, job.task, suite.seeds(job.task), methods)
+            if on_task is not None:
+                on_task(gathered.outcome(job.task, suite.seeds(job.task), methods))
 
     def on_result(job: Job, part: TaskOutcome) -> None:
         gathered.add(job, part)
@@ -436,6 +461,20 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     finally:
         bar.close()
     return {m: gathered.run(m, loaded[m], suite, weights.get(m)) for m in methods}
+
+
+def _score_task(gathered: Gathered, task: str, seeds: Sequence[int], methods: Sequence[str]) -> None:
+    """Fill in the reference scores of a finished task's episodes; a failed reference fails the task for all."""
+    for ref in (REFERENCE_UNIFORM, REFERENCE_ORACLE):
+        if (ref, task) in gathered.failed or (ref, task) in gathered.unsupported:
+            why = gathered.failed.get((ref, task)) or gathered.unsupported[(ref, task)]
+            for m in methods:
+                gathered.failed.setdefault((m, task), f"the reference {ref} failed on this task: {why}")
+            return
+    uniform = [float(gathered.metrics[(REFERENCE_UNIFORM, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
+    oracle = [float(gathered.metrics[(REFERENCE_ORACLE, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
+    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in methods if (m, task) not in gathered.failed),
+                    uniform, oracle)
 
 
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,
