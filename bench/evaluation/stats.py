@@ -14,6 +14,7 @@ The normalized task score is D4RL-style:
 
 from __future__ import annotations
 
+import functools
 from collections import defaultdict
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from typing import Any, Literal
@@ -80,6 +81,35 @@ def _apply(statistic: Statistic, samples: NDArray[np.float64]) -> NDArray[np.flo
     raise ValueError(f"unknown statistic {statistic!r}; allowed: 'mean', 'iqm'")
 
 
+#: draw tables up to this many indices are kept for reuse (8 tables of at most 8 MB)
+_CACHED_DRAWS = 2**20
+
+
+def _stratum_draws(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    """The resample indices of each stratum, ``(n_resamples, size)`` each, in stratum order.
+
+    They depend only on the seed, the resample count and the strata sizes, not on the
+    values: every metric of a task (same seeds) resamples the same rows, so the tables are
+    drawn once and reused (read-only) when small.
+    """
+    if n_resamples * sum(sizes) <= _CACHED_DRAWS:
+        return _cached_draws(seed, n_resamples, sizes)
+    return _draw(seed, n_resamples, sizes)
+
+
+def _draw(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    rng = np.random.default_rng(seed)
+    return tuple(rng.integers(0, size, size=(n_resamples, size)) for size in sizes)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_draws(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    draws = _draw(seed, n_resamples, sizes)
+    for table in draws:
+        table.setflags(write=False)
+    return draws
+
+
 def bootstrap_ci(
     values: ArrayLike,
     strata: Sequence[Hashable] | None = None,
@@ -120,14 +150,12 @@ def bootstrap_ci(
     groups: dict[Hashable, list[int]] = defaultdict(list)
     for index, label in enumerate(labels):
         groups[label].append(index)
-    rng = np.random.default_rng(seed)
+    ordered = [groups[label] for label in sorted(groups, key=repr)]
     samples = np.empty((n_resamples, x.size), dtype=np.float64)
     column = 0
-    for label in sorted(groups, key=repr):
-        members = x[groups[label]]
-        draws = rng.integers(0, members.size, size=(n_resamples, members.size))
-        samples[:, column : column + members.size] = members[draws]
-        column += members.size
+    for members, draws in zip(ordered, _stratum_draws(seed, n_resamples, tuple(map(len, ordered))), strict=True):
+        samples[:, column : column + len(members)] = x[members][draws]
+        column += len(members)
     resampled = _apply(statistic, samples)
     tail = (1.0 - confidence) / 2.0
     low, high = np.quantile(resampled, [tail, 1.0 - tail])
