@@ -137,6 +137,48 @@ def test_channel_stats_per_episode_nodes_equal_each_episode_alone():
         assert batched.jitter(b) == pytest.approx(M.jitter(a, p, v), rel=1e-12)
 
 
+def _stepwise_sums(applied, previous, valid, label, nodes) -> dict[str, np.ndarray]:
+    """The channel sums added one step at a time (a readable reference of ``ChannelStats``)."""
+    n_b = applied.shape[1]
+    sums = {k: np.zeros(n_b) for k in ("n_valid", "abs_delta", "alpha_sum", "alpha_sq", "n_label", "n_detected")}
+    shift = np.full(n_b, np.nan)
+    for k in range(applied.shape[0]):
+        for b in range(n_b):
+            a, p = applied[k, b][nodes[b]].ravel(), previous[k, b][nodes[b]].ravel()
+            m, lab = valid[k, b][nodes[b]].ravel(), label[k, b][nodes[b]].ravel() & valid[k, b][nodes[b]].ravel()
+            if np.isnan(shift[b]) and m.sum() > 0:
+                shift[b] = (a * m).sum() / m.sum()
+            d = a - np.nan_to_num(shift[b])
+            for name, value in (("n_valid", m.sum()), ("abs_delta", (np.abs(a - p) * m).sum()),
+                                ("alpha_sum", (d * m).sum()), ("alpha_sq", (d * d * m).sum()),
+                                ("n_label", lab.sum()), ("n_detected", ((a < M.DETECTION_TRUST) & lab).sum())):
+                sums[name][b] += value
+    return sums
+
+
+def test_channel_stats_buffered_equal_step_by_step_bit_for_bit(monkeypatch):
+    rng = np.random.default_rng(2)
+    n_t, n_b, n, n_l = 40, 3, 3, 6
+    applied = rng.uniform(size=(n_t, n_b, n, n_l))
+    previous = np.concatenate([np.ones((1, n_b, n, n_l)), applied[:-1]])
+    valid = rng.uniform(size=applied.shape) < 0.6
+    valid[:9, 1] = False  # episode 1 has no valid channel before step 9 (a block boundary below)
+    valid[:, 2] = False  # episode 2 never has one
+    label = (rng.uniform(size=applied.shape) < 0.3) & valid
+    nodes = np.array([[True, False, True], [True, True, True], [True, False, True]])
+    monkeypatch.setattr(M.ChannelStats, "BUFFER_VALUES", 7 * 2 * n * n_l)  # blocks of 7 steps for each group
+    expected = _stepwise_sums(applied, previous, valid, label, nodes)
+    stats = M.ChannelStats(n_b, nodes)
+    step = np.empty_like(applied[0])
+    for k in range(n_t):
+        step[:] = applied[k]  # one array, overwritten every step: what was added must not change
+        stats.add(step, previous[k], valid[k], label[k])
+    stats._flush()
+    for name, values in expected.items():
+        assert np.array_equal(getattr(stats, name), values), name
+    assert stats.jitter(2) is None and stats.weight_var(2) is None
+
+
 # --------------------------------------------------------------------------- recovery_s on synthetic traces
 
 DT = 0.1

@@ -312,11 +312,20 @@ class ChannelStats:
     :meth:`anomaly_detection_rate` then equal the pure functions above on the stacked
     arrays (tested).
 
+    Steps are buffered (at most ``BUFFER_VALUES`` values per array) and reduced a block at a
+    time: each step's per-episode sum is still taken along the contiguous last axis of that
+    step's ``(N_scored·L)`` values and added to the running sums in step order, so the
+    numbers are those of adding the steps one by one, bit for bit, at a fraction of the
+    per-step cost.
+
     Args:
         batch_size: B.
         nodes: ``(N,)`` bool, the scored UAVs, or ``(B, N)``, each episode's own
             (``scoring.nodes_from_schedule="healthy"``).
     """
+
+    #: values per buffered array (8 MB of float64)
+    BUFFER_VALUES = 2**20
 
     def __init__(self, batch_size: int, nodes: np.ndarray) -> None:
         nodes = np.asarray(nodes, dtype=bool)
@@ -328,45 +337,68 @@ class ChannelStats:
         # variance sums are taken around a per-episode shift (the first step's mean trust),
         # so a constant trust gives exactly 0 and no cancellation creeps in
         self.shift = np.full(batch_size, np.nan)
+        self._pending: list[list[tuple[np.ndarray, ...]]] = [[] for _ in self.groups]
 
     def add(self, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray, label: np.ndarray) -> None:
         """Add one step (``(B, N, L)`` arrays) of the scored interval."""
         n_b = applied.shape[0]
-        for idx, nodes in self.groups:
+        for g, (idx, nodes) in enumerate(self.groups):
             rows = slice(None) if len(idx) == n_b else idx
-            self._add_rows(rows, applied[rows][:, nodes], previous[rows][:, nodes], valid[rows][:, nodes],
-                           label[rows][:, nodes])
+            # boolean indexing copies: the caller's arrays may change in place from step to step
+            step = tuple(np.asarray(x[rows][:, nodes]).reshape(len(idx), -1) for x in (applied, previous, valid, label))
+            self._pending[g].append(step)
+            if len(self._pending[g]) * step[0].size >= self.BUFFER_VALUES:
+                self._flush_group(g)
 
-    def _add_rows(self, rows: slice | np.ndarray, applied: np.ndarray, previous: np.ndarray, valid: np.ndarray,
-                  label: np.ndarray) -> None:
-        """Add the ``(B_rows, N_scored, L)`` arrays of the episodes ``rows``."""
-        n_b = applied.shape[0]
-        # rows (B, N_scored·L), reduced along the contiguous last axis: each episode's sum
-        # is computed the same way whatever B is (bit-identical alone or batched)
-        m = valid.reshape(n_b, -1)
-        a = applied.reshape(n_b, -1)
-        p = previous.reshape(n_b, -1)
-        lab = label.reshape(n_b, -1) & m
-        count = m.sum(axis=1)
+    def _flush(self) -> None:
+        for g in range(len(self.groups)):
+            self._flush_group(g)
+
+    def _flush_group(self, g: int) -> None:
+        """Reduce group g's buffered steps into the running sums."""
+        steps = self._pending[g]
+        if not steps:
+            return
+        self._pending[g] = []
+        idx = self.groups[g][0]
+        rows = slice(None) if len(idx) == len(self.shift) else idx
+        # (C, B_rows, N_scored·L) blocks; every reduction below runs along the contiguous last axis
+        a, p, m, label = (np.stack(x) for x in zip(*steps))
+        lab = label & m
+        count = m.sum(axis=2)
         shift = self.shift[rows]
-        first = np.isnan(shift) & (count > 0)
-        if first.any():
-            shift[first] = (a * m).sum(axis=1)[first] / count[first]
-            self.shift[rows] = shift
-        d = a - np.nan_to_num(shift)[:, None]
-        self.n_valid[rows] += count
-        self.abs_delta[rows] += (np.abs(a - p) * m).sum(axis=1)
-        self.alpha_sum[rows] += (d * m).sum(axis=1)
-        self.alpha_sq[rows] += (d * d * m).sum(axis=1)
-        self.n_label[rows] += lab.sum(axis=1)
-        self.n_detected[rows] += ((a < DETECTION_TRUST) & lab).sum(axis=1)
+        # an episode's shift is its mean trust at its first step with a valid channel (0 before that step,
+        # where every term below is 0 anyway)
+        starts = np.isnan(shift) & (count > 0).any(axis=0)
+        first = np.argmax(count > 0, axis=0)
+        mean_trust = (a * m).sum(axis=2)
+        cols = np.flatnonzero(starts)
+        shift[cols] = mean_trust[first[cols], cols] / count[first[cols], cols]
+        self.shift[rows] = shift
+        shifts = np.where(np.isnan(shift)[None, :] | (np.arange(len(steps))[:, None] < np.where(starts, first, 0)),
+                          0.0, np.nan_to_num(shift)[None, :])
+        d = a - shifts[:, :, None]
+        per_step = {
+            "n_valid": count,
+            "abs_delta": (np.abs(a - p) * m).sum(axis=2),
+            "alpha_sum": (d * m).sum(axis=2),
+            "alpha_sq": (d * d * m).sum(axis=2),
+            "n_label": lab.sum(axis=2),
+            "n_detected": ((a < DETECTION_TRUST) & lab).sum(axis=2),
+        }
+        for name, values in per_step.items():
+            total = getattr(self, name)
+            # the running sum first, then each step in order: the same additions as one step at a time
+            total[rows] = np.cumsum(np.vstack([total[rows][None, :], values]), axis=0)[-1]
 
     def jitter(self, b: int) -> float | None:
         """Episode b's jitter (None without valid channel-steps)."""
+        self._flush()
         return float(self.abs_delta[b] / self.n_valid[b]) if self.n_valid[b] > 0 else None
 
     def weight_var(self, b: int) -> float | None:
         """Episode b's trust variance (None without valid channel-steps)."""
+        self._flush()
         n = self.n_valid[b]
         if n <= 0:
             return None
@@ -376,4 +408,5 @@ class ChannelStats:
 
     def anomaly_detection_rate(self, b: int) -> float | None:
         """Episode b's detection rate (None without labelled channel-steps)."""
+        self._flush()
         return float(self.n_detected[b] / self.n_label[b]) if self.n_label[b] > 0 else None

@@ -473,8 +473,8 @@ def _score_task(gathered: Gathered, task: str, seeds: Sequence[int], methods: Se
             return
     uniform = [float(gathered.metrics[(REFERENCE_UNIFORM, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
     oracle = [float(gathered.metrics[(REFERENCE_ORACLE, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
-    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in methods if (m, task) not in gathered.failed),
-                    uniform, oracle)
+    scored = [m for m in methods if (m, task) not in gathered.failed]
+    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in scored), uniform, oracle)
 
 
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,
