@@ -83,6 +83,7 @@ def ray_rerun(address: str | None = None, num_cpus: int | None = None) -> Rerun:
             pending = [remote.remote(method, chunk, options) for chunk in chunks]
             found: dict[tuple[str, int], dict] = {}
             failure: SubmissionError | None = None
+            cause: BaseException | None = None
             # every chunk is awaited, also after one has failed: cancelling the others could abort
             # this process (see ``cancel_outstanding``), and each chunk is bounded by its sandbox's limits
             while pending:
@@ -91,7 +92,8 @@ def ray_rerun(address: str | None = None, num_cpus: int | None = None) -> Rerun:
                     try:
                         ok, value = ray.get(ref)
                     except ray.exceptions.RayError as err:  # its Ray worker died more than MAX_RETRIES times, …
-                        failure = failure or VerificationFailed(f"the verification re-run on Ray failed: {err}")
+                        if failure is None:
+                            failure, cause = VerificationFailed(f"the verification re-run on Ray failed: {err}"), err
                         continue
                     if not ok:
                         name, message = value
@@ -100,7 +102,7 @@ def ray_rerun(address: str | None = None, num_cpus: int | None = None) -> Rerun:
                     for episode in value[0]:
                         found[(str(episode["task"]), int(episode["seed"]))] = episode
             if failure is not None:
-                raise failure
+                raise failure from cause
             wanted = [(str(t), int(s)) for t, s in episodes]
             return [found[key] for key in wanted if key in found], time.perf_counter() - began
         except BaseException:

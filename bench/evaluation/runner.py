@@ -427,9 +427,11 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     # cost. The two references of the scores run once per chunk, as jobs of their own (or as
     # the evaluated methods themselves), and are filled in here when a task's jobs are done
     extra = [r for r in (REFERENCE_UNIFORM, REFERENCE_ORACLE) if r not in methods]
-    jobs = [job for j in make_jobs(methods, suite, seeds_per_job, trace, overrides)
-            for job in ([Job(j.task, r, j.seeds, False, overrides) for r in extra] if j.method == methods[0] else [])
-            + [j]]
+    jobs: list[Job] = []
+    for job in make_jobs(methods, suite, seeds_per_job, trace, overrides):
+        if job.method == methods[0]:  # a chunk's first job: the chunk's references go just before it
+            jobs += [Job(job.task, ref, job.seeds, False, overrides) for ref in extra]
+        jobs.append(job)
     left = {task: sum(j.task == task for j in jobs) for task in suite.tasks}
     gathered = Gathered()
     label = methods[0] if len(methods) == 1 else f"{len(methods)} methods"
