@@ -128,6 +128,12 @@ def test_a_suite_runs_each_reference_once_per_task_and_scores_as_evaluate_task(m
         for m in ("chi2-gate", "random", "uniform"):
             assert [e["metrics"] for e in runs[m].episodes if e["task"] == task] == alone.episodes[m]
     assert all(e["metrics"]["uniform_rmse"] is not None for e in runs["random"].episodes)
+    # a later evaluation in this process takes the references from the process cache
+    ran.clear()
+    huber = evaluate_methods(["huber"], suite, seeds_per_job=1, trace=False, progress=False, overrides=short)["huber"]
+    assert sorted(ran) == sorted(("huber", t, (s,)) for t, s in suite.episodes)
+    assert [e["metrics"]["uniform_rmse"] for e in huber.episodes] == \
+        [e["metrics"]["rmse"] for e in runs["uniform"].episodes]
 
 
 def test_a_failed_reference_fails_its_task_for_every_method(monkeypatch):

@@ -427,10 +427,12 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     # cost. The two references of the scores run once per chunk, as jobs of their own (or as
     # the evaluated methods themselves), and are filled in here when a task's jobs are done
     extra = [r for r in (REFERENCE_UNIFORM, REFERENCE_ORACLE) if r not in methods]
+    keys = {task: _spec_key(get_spec(task, **(overrides or {}))) for task in suite.tasks}
     jobs: list[Job] = []
     for job in make_jobs(methods, suite, seeds_per_job, trace, overrides):
         if job.method == methods[0]:  # a chunk's first job: the chunk's references go just before it
-            jobs += [Job(job.task, ref, job.seeds, False, overrides) for ref in extra]
+            jobs += [Job(job.task, ref, job.seeds, False, overrides) for ref in extra
+                     if any((ref, keys[job.task], s) not in _REFERENCE_CACHE for s in job.seeds)]
         jobs.append(job)
     left = {task: sum(j.task == task for j in jobs) for task in suite.tasks}
     gathered = Gathered()
@@ -443,7 +445,7 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
         bar.update(1)
         bar.set_postfix_str(job.task.removeprefix("swarmloc/"))
         if left[job.task] == 0:
-            _score_task(gathered, job.task, suite.seeds(job.task), methods)
+            _score_task(gathered, job.task, suite.seeds(job.task), methods, keys[job.task])
             if on_task is not None:
                 on_task(gathered.outcome(job.task, suite.seeds(job.task), methods))
 
@@ -465,18 +467,27 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     return {m: gathered.run(m, loaded[m], suite, weights.get(m)) for m in methods}
 
 
-def _score_task(gathered: Gathered, task: str, seeds: Sequence[int], methods: Sequence[str]) -> None:
-    """Fill in the reference scores of a finished task's episodes; a failed reference fails the task for all."""
+def _score_task(gathered: Gathered, task: str, seeds: Sequence[int], methods: Sequence[str], key: str) -> None:
+    """Fill in the reference scores of a finished task's episodes; a failed reference fails the task for all.
+
+    The references come from this evaluation's runs (kept in the process cache, for the next
+    evaluation here) or, where it ran none, from that cache.
+    """
+    refs: dict[str, list[float]] = {}
     for ref in (REFERENCE_UNIFORM, REFERENCE_ORACLE):
         if (ref, task) in gathered.failed or (ref, task) in gathered.unsupported:
             why = gathered.failed.get((ref, task)) or gathered.unsupported[(ref, task)]
             for m in methods:
                 gathered.failed.setdefault((m, task), f"the reference {ref} failed on this task: {why}")
             return
-    uniform = [float(gathered.metrics[(REFERENCE_UNIFORM, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
-    oracle = [float(gathered.metrics[(REFERENCE_ORACLE, task, s)]["rmse"]) for s in seeds]  # type: ignore[arg-type]
+        for s in seeds:
+            run = gathered.metrics.get((ref, task, s))
+            if run is not None:
+                _REFERENCE_CACHE[(ref, key, s)] = float(run["rmse"])  # type: ignore[arg-type]
+        refs[ref] = [_REFERENCE_CACHE[(ref, key, s)] for s in seeds]
     scored = [m for m in methods if (m, task) not in gathered.failed]
-    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in scored), uniform, oracle)
+    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in scored), refs[REFERENCE_UNIFORM],
+                    refs[REFERENCE_ORACLE])
 
 
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,
