@@ -114,7 +114,7 @@ def test_a_suite_runs_each_reference_once_per_task_and_scores_as_evaluate_task(m
         return real_rollout(loaded, spec, seeds, trace)
 
     monkeypatch.setattr(runner, "rollout", counting)
-    runner._REFERENCE_CACHE.clear()
+    monkeypatch.setattr(runner, "_REFERENCE_CACHE", {})  # nothing cached by earlier tests
     short = {"duration": 8.0}
     suite = Suite("tiny3", "0", (("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/NLOS-v0", 1_000_001),
                                  ("swarmloc/CascadedFault-v0", 1_000_003)))
@@ -147,6 +147,7 @@ def test_a_failed_reference_fails_its_task_for_every_method(monkeypatch):
         return real_rollout(loaded, spec, seeds, trace)
 
     monkeypatch.setattr(runner, "rollout", broken_oracle)
+    monkeypatch.setattr(runner, "_REFERENCE_CACHE", {})
     suite = Suite("tiny2", "0", (("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/Ideal-v0", 1_000_000)))
     run = evaluate_methods(["random"], suite, trace=False, progress=False, overrides={"duration": 3.0})["random"]
     assert list(run.failed) == ["swarmloc/NLOS-v0"]
