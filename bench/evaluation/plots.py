@@ -113,7 +113,7 @@ def _panel_margins(fig: plt.Figure, left: float = 0.55, right: float = 0.15, top
     """Margins of a grid of panels, fixed in inches (left, right, top, bottom).
 
     ``tight_layout`` measures every tick label of every panel: on a figure of 13 panels it
-    took two thirds of the drawing time. Panels of the same kind need the same room, so
+    took a third of the drawing time. Panels of the same kind need the same room, so
     fixed margins lay them out as well, at no cost.
     """
     w, h = fig.get_size_inches()
