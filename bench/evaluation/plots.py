@@ -101,8 +101,12 @@ def _shade(ax: plt.Axes, spans: list[tuple[float, float]]) -> None:
         ax.axvspan(a, b, color="0.85", zorder=0, label="fault" if i == 0 else None)
 
 
-def _save(fig: plt.Figure, path: Path) -> Path:
-    fig.tight_layout()
+def _save(fig: plt.Figure, path: Path, margins: dict[str, float] | None = None) -> Path:
+    """Lay out (``tight_layout``, or ``_panel_margins(**margins)`` for a grid of panels), write, close."""
+    if margins is None:
+        fig.tight_layout()
+    else:
+        _panel_margins(fig, **margins)
     fig.savefig(path, dpi=_DPI)
     plt.close(fig)
     return path
@@ -186,10 +190,7 @@ def plot_trust(traces: Sequence[Trace], path: Path) -> Path | None:
     handles.append(plt.Line2D([], [], marker="x", ls="", color="red", label="labelled fault"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=7, frameon=False)
     fig.suptitle(f"{short_name(traces[0].task)} — applied trust α vs time [s]", fontsize=9)
-    _panel_margins(fig, bottom=0.75, hspace=0.35, wspace=0.08)  # the legend of channel kinds below
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return _save(fig, path, {"bottom": 0.75, "hspace": 0.35, "wspace": 0.08})  # the legend of channel kinds below
 
 
 def plot_trajectories(traces: Sequence[Trace], path: Path) -> Path:
@@ -212,10 +213,7 @@ def plot_trajectories(traces: Sequence[Trace], path: Path) -> Path:
     for ax in axes.flat[len(traces):]:
         ax.axis("off")
     fig.suptitle(f"{short_name(traces[0].task)} — x–y [m], truth black", fontsize=9)
-    _panel_margins(fig, top=0.8)
-    fig.savefig(path, dpi=_DPI)
-    plt.close(fig)
-    return path
+    return _save(fig, path, {"top": 0.8})
 
 
 def plot_task(traces: Sequence[Trace], out: Path) -> list[Path]:
