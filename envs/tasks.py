@@ -236,7 +236,12 @@ UTIL_TDOA_FLIGHTS: dict[str, tuple[str, str, str, float, float]] = {
 #: range-difference σ per TDOA mode [m]: the median over anchor pairs of the per-pair robust
 #: std (1.4826·MAD of the residual against the truth) on the line-of-sight flights of the
 #: README: TDOA2 0.139 (c0425-traj2), 0.164 (c0426-traj1); TDOA3 0.178 (c0425-traj14),
-#: 0.205 (c0426-traj15)
+#: 0.205 (c0426-traj15). One σ per mode, not per pair: with each pair's own robust std
+#: (README table, both orders averaged) the uniform CEKF on the two TDOA3 line-of-sight
+#: flights goes 0.335 → 0.317 m (c0425-traj14) and 0.316 → 0.319 m (c0426-traj15) when each
+#: flight takes the other's statistics (same layout), and to 0.320 / 0.281 m only when a
+#: flight takes its own statistics, i.e. its own truth (first test seed). The heavy tail
+#: (11–15 % of the range differences off by more than 0.5 m) is what a per-pair σ cannot fix
 UTIL_TDOA_SIGMA = {"TDOA2": 0.15, "TDOA3": 0.20}
 #: process-model IMU σ per session [m/s²], measured as for UTILFlight-v0: integrating the
 #: AHRS world acceleration for 1 s from the true velocity leaves a horizontal velocity error
