@@ -17,6 +17,14 @@ Methods registered from this module (see ``swarmloc.agents.registry``):
 | ``mappo-no-isolation`` | trust fixed at 1 after training (madrl Exp. 6 "no evaluation") + smoothing |
 | ``mappo-accuracy-only`` | weights trained with λ = 0 for delay, energy and jitter (madrl Exp. 7) + smoothing |
 
+**Shipped weights per benchmark version** (``SHIPPED``; the runner passes the version of the
+task it runs, ``load_method(..., version=)``): the v0 tasks run ``mappo.pt`` and
+``mappo_accuracy_only.pt``, trained on nine v0 UWB ranging tasks and frozen with v0; the v1
+tasks run ``mappo_v1.pt`` and ``mappo_accuracy_only_v1.pt``, trained on the six v1 randomized
+families' training seeds with the privileged auxiliary label loss (``--label-coef 1``, as for
+``mappo-set-gru``): without it the paper's actor collapses to α ≈ 1 there (docs/learned.md).
+A method loaded without a version gets the newest.
+
 Only torch is needed here (no torchrl): evaluation stays cheap to import.
 """
 
@@ -33,7 +41,7 @@ from swarmloc.envs.channels import N_KINDS, ChannelLayout
 from swarmloc.envs.observation import INNOVATION, KIND0, N_FEATURES, NIS, VALID
 
 from .protocols import TrustInput
-from .registry import WEIGHTS_DIR  # noqa: F401  (re-exported)
+from .registry import WEIGHTS_DIR, shipped_for_version
 from .smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing  # noqa: F401  (re-exported)
 
 #: the logit is soft-limited to ±LOGIT_LIMIT, so α ∈ [3.4e-4, 0.99966]: below α_th (0.05)
@@ -270,30 +278,40 @@ def weights_metadata(weights: str | Path) -> dict:
 # --------------------------------------------------------------------------- registry factories
 
 
-def _weights(weights: str | Path | None, default: str) -> Path:
-    return Path(weights) if weights is not None else WEIGHTS_DIR / default
+#: the shipped weights of each benchmark version, trained on that version's tasks (v0: the
+#: v0 UWB ranging tasks, frozen with v0; v1: the v1 randomized families' training seeds)
+SHIPPED: dict[str, dict[int, str]] = {
+    "mappo": {0: "mappo.pt", 1: "mappo_v1.pt"},
+    "mappo-accuracy-only": {0: "mappo_accuracy_only.pt", 1: "mappo_accuracy_only_v1.pt"},
+}
 
 
-def _policy(weights: str | Path | None, default: str, isolation: bool = True) -> MappoPolicy:
-    path = _weights(weights, default)
+def shipped_weights(method: str, version: int | None = None) -> Path:
+    """The shipped weights file of ``method`` (``SHIPPED``) for benchmark ``version`` (None: the newest)."""
+    return shipped_for_version({v: WEIGHTS_DIR / name for v, name in SHIPPED[method].items()}, version)
+
+
+def _policy(weights: str | Path | None, version: int | None, shipped: str, isolation: bool = True) -> MappoPolicy:
+    path = Path(weights) if weights is not None else shipped_weights(shipped, version)
     return MappoPolicy(load_actor(path), isolation=isolation, kinds=weights_kinds(path))
 
 
-def mappo(weights: str | Path | None = None) -> MarkovSmoothing:
-    """``mappo``: shipped weights, deterministic actor + adaptive Markov smoothing (β_max 0.85, γ 2)."""
-    return MarkovSmoothing(_policy(weights, "mappo.pt"), BETA_MAX, SMOOTHING_GAMMA)
+def mappo(weights: str | Path | None = None, version: int | None = None) -> MarkovSmoothing:
+    """``mappo``: the shipped weights of the benchmark version (``SHIPPED``), deterministic actor + adaptive
+    Markov smoothing (β_max 0.85, γ 2)."""
+    return MarkovSmoothing(_policy(weights, version, "mappo"), BETA_MAX, SMOOTHING_GAMMA)
 
 
-def mappo_no_smoothing(weights: str | Path | None = None) -> MappoPolicy:
+def mappo_no_smoothing(weights: str | Path | None = None, version: int | None = None) -> MappoPolicy:
     """``mappo-no-smoothing``: the same weights, raw α applied (madrl Exp. 6)."""
-    return _policy(weights, "mappo.pt")
+    return _policy(weights, version, "mappo")
 
 
-def mappo_no_isolation(weights: str | Path | None = None) -> MarkovSmoothing:
+def mappo_no_isolation(weights: str | Path | None = None, version: int | None = None) -> MarkovSmoothing:
     """``mappo-no-isolation``: trust fixed at 1 after training, smoothing kept (madrl Exp. 6 "no evaluation")."""
-    return MarkovSmoothing(_policy(weights, "mappo.pt", isolation=False), BETA_MAX, SMOOTHING_GAMMA)
+    return MarkovSmoothing(_policy(weights, version, "mappo", isolation=False), BETA_MAX, SMOOTHING_GAMMA)
 
 
-def mappo_accuracy_only(weights: str | Path | None = None) -> MarkovSmoothing:
+def mappo_accuracy_only(weights: str | Path | None = None, version: int | None = None) -> MarkovSmoothing:
     """``mappo-accuracy-only``: weights trained with λ_delay = λ_energy = λ_jitter = 0 (madrl Exp. 7) + smoothing."""
-    return MarkovSmoothing(_policy(weights, "mappo_accuracy_only.pt"), BETA_MAX, SMOOTHING_GAMMA)
+    return MarkovSmoothing(_policy(weights, version, "mappo-accuracy-only"), BETA_MAX, SMOOTHING_GAMMA)

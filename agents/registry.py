@@ -9,9 +9,12 @@
 * ``path/to/file.py:factory`` — the same from a file.
 
 A factory is called with no argument, or with ``weights=<path>`` when a weights file is
-given. The method it returns is a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B
-``Estimator`` (has ``step``); its ``privileged`` and ``deterministic`` attributes are
-read (defaults False and True).
+given, and with ``version=<benchmark version>`` when the caller names the version of the
+tasks it will run and the factory takes a ``version`` argument: a learned method ships one
+set of weights per benchmark version (``shipped_for_version``), trained on that version's
+tasks, so that the frozen v0 results stay reproducible beside v1. The method it returns is
+a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B ``Estimator`` (has ``step``); its
+``privileged`` and ``deterministic`` attributes are read (defaults False and True).
 
 Adding a shipped method: one :class:`MethodEntry` line in :data:`REGISTRY` with a lazy
 ``module:attr`` factory string (modules are imported only when the method is loaded, so
@@ -98,7 +101,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "ESS-adaptive particle count in [100, 800] (pf-nn §3.3)"),
     MethodEntry("pf-nn", f"{_P}:make_pfnn", "B", False, True,
                 "adaptive PF + 6–12–1 weight-correcting network, trained offline (pf-nn §3.4)"),
-    MethodEntry("mappo", f"{_M}:mappo", "A", False, True, "MAPPO link trust (shipped weights) + Markov smoothing"),
+    MethodEntry("mappo", f"{_M}:mappo", "A", False, True,
+                "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing"),
     MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", False, True,
                 "MAPPO, raw α without smoothing (madrl Exp. 6)"),
     MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A", False, True,
@@ -185,16 +189,39 @@ def _resolve(module_name: str, attr: str, text: str) -> Callable[..., Any]:
     return obj
 
 
-def _call_factory(factory: Callable[..., Any], weights: str | Path | None, text: str) -> Any:
-    if weights is None:
-        return factory()
+def shipped_for_version(table: dict[int, Path], version: int | None) -> Path:
+    """The shipped weights of benchmark ``version``: ``table``'s entry for it, else for the newest older one.
+
+    ``version`` None means the newest benchmark version in ``table``.
+
+    Raises:
+        ValueError: ``version`` is negative or older than every entry.
+    """
+    if version is None:
+        return table[max(table)]
+    if isinstance(version, bool) or not isinstance(version, int) or version < min(table):
+        raise ValueError(f"version must be an int >= {min(table)} (a benchmark version), got {version!r}")
+    return table[max(v for v in table if v <= version)]
+
+
+def _accepts(factory: Callable[..., Any], name: str) -> bool:
     try:
         params = inspect.signature(factory).parameters
     except (TypeError, ValueError):
-        params = {}
-    if "weights" not in params and not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        raise TypeError(f"a weights file was given but the factory of {text!r} takes no 'weights' argument")
-    return factory(weights=str(weights))
+        return False
+    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
+
+
+def _call_factory(factory: Callable[..., Any], weights: str | Path | None, text: str,
+                  version: int | None = None) -> Any:
+    kwargs: dict[str, Any] = {}
+    if weights is not None:
+        if not _accepts(factory, "weights"):
+            raise TypeError(f"a weights file was given but the factory of {text!r} takes no 'weights' argument")
+        kwargs["weights"] = str(weights)
+    if version is not None and _accepts(factory, "version"):
+        kwargs["version"] = int(version)
+    return factory(**kwargs)
 
 
 def track_of(method: Any, text: str = "") -> Track:
@@ -211,12 +238,15 @@ def track_of(method: Any, text: str = "") -> Track:
                     f"nor an Estimator (reset + step); see swarmloc.agents.protocols")
 
 
-def load_method(text: str, weights: str | Path | None = None) -> LoadedMethod:
+def load_method(text: str, weights: str | Path | None = None, version: int | None = None) -> LoadedMethod:
     """Build a method from a registered name or an entry point.
 
     Args:
         text: ``name``, ``name+smooth``, ``package.module:factory`` or ``path/to/file.py:factory``.
         weights: optional weights file handed to the factory as ``weights=``.
+        version: the benchmark version of the tasks the method will run (``TaskSpec.version``),
+            handed to a factory that takes ``version=`` (the shipped weights of that version);
+            None: the newest.
 
     Returns:
         The ``LoadedMethod``.
@@ -234,10 +264,10 @@ def load_method(text: str, weights: str | Path | None = None) -> LoadedMethod:
     if match is None:
         entry = get_entry(base)
         module_name, attr = entry.factory.split(":")
-        method = _call_factory(_resolve(module_name, attr, text), weights, text)
+        method = _call_factory(_resolve(module_name, attr, text), weights, text, version)
         name = entry.name
     else:
-        method = _call_factory(_resolve(match["module"], match["attr"], text), weights, text)
+        method = _call_factory(_resolve(match["module"], match["attr"], text), weights, text, version)
         name = match["attr"].rsplit(".", 1)[-1]
     track = track_of(method, text)
     if smooth:

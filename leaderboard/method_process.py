@@ -178,8 +178,8 @@ def _handle(instances: dict[int, Any], operation: str, args: tuple[Any, ...]) ->
     from swarmloc.agents.registry import load_method
 
     if operation == "load":
-        entry_point, weights = args
-        loaded = load_method(entry_point, weights)
+        entry_point, weights, version = args
+        loaded = load_method(entry_point, weights, version)
         handle = len(instances) + 1
         instances[handle] = loaded
         return encode_reply({
@@ -354,8 +354,8 @@ class RemoteFactory:
     def __init__(self, entry_point: str, channel: MethodChannel) -> None:
         self.entry_point, self.channel = entry_point, channel
 
-    def __call__(self, weights: str | None = None) -> RemotePolicy | RemoteEstimator:
-        header, _ = self.channel.call("load", self.entry_point, weights)
+    def __call__(self, weights: str | None = None, version: int | None = None) -> RemotePolicy | RemoteEstimator:
+        header, _ = self.channel.call("load", self.entry_point, weights, version)
         if header.get("track") == "A":
             return RemotePolicy(self.channel, header)
         if header.get("track") == "B":

@@ -340,3 +340,25 @@ def test_channel_kinds_outside_training_get_nominal_trust():
     assert np.all(a_some[..., [2, 3]] == 1.0) and np.all(a_all < 1.0)
     with pytest.raises(ValueError, match="kinds"):
         MappoPolicy(actor, kinds=np.ones(3, bool))
+
+
+@pytest.mark.parametrize("name", ["mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only"])
+def test_each_benchmark_version_gets_the_weights_trained_on_its_tasks(name):
+    """v0 tasks run the frozen v0 weights, v1 tasks (and no version: the newest) the ones trained on v1."""
+    from swarmloc.agents.mappo_policy import SHIPPED as SHIPPED_FILES
+    from swarmloc.agents.mappo_policy import shipped_weights, weights_metadata
+
+    family = "mappo-accuracy-only" if name == "mappo-accuracy-only" else "mappo"
+    for version, file in SHIPPED_FILES[family].items():
+        path = WEIGHTS_DIR / file
+        assert shipped_weights(family, version) == path and path.is_file(), path
+        tasks = weights_metadata(path)["config"]["tasks"]
+        assert tasks and all(t.endswith(f"-v{version}") for t in tasks)  # trained on that version's tasks only
+        if version >= 1:
+            assert all("Random" in t for t in tasks)  # the randomized families' training seeds
+        expected = load_actor(path).state_dict()
+        for v in (version,) + ((None,) if version == max(SHIPPED_FILES[family]) else ()):
+            method = load_method(name, version=v).method
+            actor = (method.policy if isinstance(method, MarkovSmoothing) else method).actor
+            got = actor.state_dict()
+            assert got.keys() == expected.keys() and all(torch.equal(got[k], expected[k]) for k in got)

@@ -174,3 +174,37 @@ def test_registry_metadata_and_loading(tmp_path):
         load_method(f"{user}:nope")
     with pytest.raises(TypeError, match="takes no 'weights'"):
         load_method("uniform", weights=user)
+
+
+def test_load_method_hands_the_benchmark_version_to_factories_that_take_it(tmp_path):
+    """``version=`` reaches a factory with a ``version`` (or ``**kwargs``) parameter and is left out otherwise."""
+    from swarmloc.agents.registry import shipped_for_version
+
+    user = tmp_path / "versioned.py"
+    user.write_text(
+        "import numpy as np\n"
+        "class Const:\n"
+        "    privileged = False\n"
+        "    def __init__(self, version):\n"
+        "        self.version = version\n"
+        "    def reset(self, batch_size, layout, keys):\n"
+        "        pass\n"
+        "    def act(self, inp):\n"
+        "        return np.ones(inp.valid.shape)\n"
+        "def with_version(weights=None, version=None):\n"
+        "    return Const(version)\n"
+        "def with_kwargs(**kwargs):\n"
+        "    return Const(kwargs.get('version'))\n"
+        "def plain():\n"
+        "    return Const('none taken')\n"
+    )
+    assert load_method(f"{user}:with_version", version=1).method.version == 1
+    assert load_method(f"{user}:with_version").method.version is None
+    assert load_method(f"{user}:with_kwargs", version=0).method.version == 0
+    assert load_method(f"{user}:plain", version=1).method.version == "none taken"
+    table = {0: tmp_path / "v0.pt", 1: tmp_path / "v1.pt"}
+    assert shipped_for_version(table, None) == table[1]
+    assert [shipped_for_version(table, v) for v in (0, 1, 7)] == [table[0], table[1], table[1]]
+    for bad in (-1, True, 1.0, "1"):
+        with pytest.raises(ValueError, match="version must be an int >= 0"):
+            shipped_for_version(table, bad)

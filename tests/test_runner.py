@@ -215,7 +215,8 @@ def test_unsupported_task_gives_null_metrics(monkeypatch):
 
     real_load = runner.load_method
     monkeypatch.setattr(runner, "load_method",
-                        lambda text, weights=None: _as_loaded(_NeedsGps()) if text == "needs-gps" else real_load(text))
+                        lambda text, weights=None, version=None: (_as_loaded(_NeedsGps()) if text == "needs-gps"
+                                                                  else real_load(text, version=version)))
     out = evaluate_task(["needs-gps"], get_spec("swarmloc/Ideal-v0", duration=0.5), [1, 2])
     assert out.unsupported["needs-gps"].endswith("this estimator needs GPS")
     assert all(v is None for m in out.episodes["needs-gps"] for v in m.values())
@@ -253,7 +254,7 @@ def test_evaluate_task_pins_torch_after_loading_the_method(monkeypatch):
 
     calls = []
     real_load = runner.load_method
-    monkeypatch.setattr(runner, "load_method", lambda text, weights=None: calls.append("load") or real_load(text))
+    monkeypatch.setattr(runner, "load_method", lambda text, weights=None, version=None: calls.append("load") or real_load(text, version=version))
     monkeypatch.setattr(runner, "pin_torch_threads", lambda: calls.append("pin"))
     evaluate_task(["uniform"], get_spec("swarmloc/Ideal-v0", duration=0.5), [1])
     assert calls[:2] == ["load", "pin"]

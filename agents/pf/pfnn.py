@@ -22,7 +22,7 @@ from gymnasium.envs.registration import parse_env_id
 
 from swarmloc.envs.rng import Stream, normal_array
 
-from ..registry import WEIGHTS_DIR
+from ..registry import WEIGHTS_DIR, shipped_for_version
 
 from .core import SLOT_NN_INIT, rng_index
 
@@ -43,7 +43,7 @@ def shipped_weights(task_id: str) -> Path:
     _, _, version = parse_env_id(task_id)
     if version is None:
         raise ValueError(f"task ID {task_id!r} has no version; expected e.g. 'swarmloc/Indoor-v1'")
-    return SHIPPED_WEIGHTS[max(v for v in SHIPPED_WEIGHTS if v <= version)]
+    return shipped_for_version(SHIPPED_WEIGHTS, version)
 
 
 @dataclass(frozen=True)

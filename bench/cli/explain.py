@@ -45,6 +45,7 @@ def run(opts: Options) -> int:
 
     from swarmloc.agents.registry import load_method
     from swarmloc.bench.common.files import atomic_path
+    from swarmloc.envs.tasks import get_spec
 
     try:
         from swarmloc.bench.explain import explain
@@ -57,7 +58,7 @@ def run(opts: Options) -> int:
     started = time.perf_counter()
     overrides = {} if opts.duration is None else {"duration": opts.duration}
     try:
-        method = load_method(opts.method, opts.weights)
+        method = load_method(opts.method, opts.weights, version=get_spec(opts.task).version)
         ex = explain(method, opts.task, [opts.seed], explainer=opts.explainer, baseline=opts.baseline,
                      channels=opts.channels or None, n_samples=opts.samples, reference=opts.reference or None,
                      **overrides)

@@ -71,7 +71,8 @@ def load_traces(results_path: str | os.PathLike[str]) -> list[Trace]:
             first.setdefault(episode.task, episode.seed)
     traces = []
     for task, seed in first.items():
-        _, trace = rollout(load_method(results.method.entry_point), get_spec(task), [seed], trace=True)
+        spec = get_spec(task)
+        _, trace = rollout(load_method(results.method.entry_point, version=spec.version), spec, [seed], trace=True)
         assert trace is not None
         trace.method = results.method.name
         traces.append(trace)

@@ -241,7 +241,7 @@ def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[floa
     key = _spec_key(spec)
     missing = [int(s) for s in seeds if (name, key, int(s)) not in _REFERENCE_CACHE]
     if missing:
-        metrics, _ = rollout(load_method(name), spec, missing)
+        metrics, _ = rollout(load_method(name, version=spec.version), spec, missing)
         for seed, m in zip(missing, metrics):
             _REFERENCE_CACHE[(name, key, seed)] = float(m["rmse"])  # type: ignore[arg-type]
     return [_REFERENCE_CACHE[(name, key, int(s))] for s in seeds]
@@ -270,7 +270,7 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
     outcome = TaskOutcome(task=spec.task_id, seeds=seeds)
     weights = weights or {}
     for text in methods:
-        loaded = load_method(text, weights.get(text))
+        loaded = load_method(text, weights.get(text), version=spec.version)
         pin_torch_threads()  # a pool worker's first torch method has just imported torch
         started = time.process_time()
         try:

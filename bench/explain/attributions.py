@@ -156,7 +156,7 @@ def attribute(method: str | LoadedMethod, episode: Episode, *, explainer: str = 
     if explainer not in EXPLAINERS:
         raise ValueError(f"unknown explainer {explainer!r}; choose one of {', '.join(EXPLAINERS)}")
     check_baseline(baseline)
-    loaded = as_loaded(method)
+    loaded = as_loaded(method, episode.spec.version)
     explained = _explained_mask(episode, channels)
     base = baseline_features(episode.obs, baseline)
     form = differentiable(loaded.method) if explainer != "shapley-sampling" else None
@@ -240,7 +240,7 @@ def explain(method: str | LoadedMethod, task: str | TaskSpec, seeds: Sequence[in
         The ``Explanation``.
     """
     spec = task if isinstance(task, TaskSpec) else get_spec(task, **overrides)
-    loaded = as_loaded(method)
+    loaded = as_loaded(method, spec.version)
     from .shapley import fresh_copy
 
     pristine = LoadedMethod(loaded.name, loaded.entry_point, loaded.track, loaded.privileged, loaded.deterministic,

@@ -87,14 +87,15 @@ class Episode:
             yield self.input(k)
 
 
-def as_loaded(method: str | LoadedMethod) -> LoadedMethod:
-    """A ``LoadedMethod`` from a name (``load_method``) or as given; refuses what cannot be explained.
+def as_loaded(method: str | LoadedMethod, version: int | None = None) -> LoadedMethod:
+    """A ``LoadedMethod`` from a name (``load_method``, the shipped weights of benchmark ``version``) or as
+    given; refuses what cannot be explained.
 
     Raises:
         ValueError: a Track B estimator (it sets no per-channel trust from features) or a
             privileged method (its trust follows the fault labels, not the features).
     """
-    loaded = load_method(method) if isinstance(method, str) else method
+    loaded = load_method(method, version=version) if isinstance(method, str) else method
     if loaded.track != "A":
         raise ValueError(f"{loaded.name} is a Track B estimator; explanations attribute the trust of "
                          f"Track A (link-trust) methods to their observation features")
@@ -125,7 +126,7 @@ def replay(method: str | LoadedMethod, spec: TaskSpec, seeds: Sequence[int]) -> 
     Returns:
         The recorded ``Episode``.
     """
-    loaded = as_loaded(method)
+    loaded = as_loaded(method, spec.version)
     seeds_arr = np.asarray(validate_seeds(list(seeds)), dtype=np.int64)
     n_b, n_t = len(seeds_arr), spec.n_steps
     env = TrustEnvBatch(spec, n_b)

@@ -15,10 +15,11 @@ is the frozen v0 report):
 | Exp. 6 ablations (Tables 7, 8) | NLOSStep | mappo vs no smoothing vs no isolation; smoothing γ sensitivity |
 | Exp. 7 reward ablation (Fig. 10) | NLOS | mappo (standard reward) vs mappo-accuracy-only: RMSE, delay, energy, weight variance |
 
-``mappo`` is the paper's architecture with its shipped weights (trained on v0 tasks; on
-the v1 families the same architecture trained by RL alone collapses to uniform trust, see
-``docs/learned.md``). On v1 the learned reference ``mappo-set-gru`` is measured beside it
-in Exp. 1, 3, 4 and 5.
+``mappo`` is the paper's architecture with the shipped weights of the report's benchmark
+version: on v0 those trained on v0 tasks, on v1 those trained on the v1 randomized families'
+training seeds with the privileged auxiliary label loss (by RL alone the same architecture
+collapses to uniform trust there, see ``docs/learned.md``). On v1 the learned reference
+``mappo-set-gru`` is measured beside it in Exp. 1, 3, 4 and 5.
 
 The report ends with the issue-5 targets (pass / fail) for mappo and, for reference, the
 classical chi2-gate and the privileged oracle. Exp. 2 (MILUV real data) is not covered.
@@ -119,7 +120,8 @@ def _traces(task: str, method: str, weights: str | None, seeds: list[int]) -> li
     """Per-step traces of single-seed runs (batching does not change an episode)."""
     out = []
     for seed in seeds:
-        _, trace = rollout(load_method(method, weights), get_spec(task), [seed], trace=True)
+        spec = get_spec(task)
+        _, trace = rollout(load_method(method, weights, version=spec.version), spec, [seed], trace=True)
         out.append(trace)
     return out
 
@@ -228,14 +230,14 @@ def exp6(runs: Runs, seeds: list[int]) -> list[str]:
     # Table 8: smoothing sensitivity γ, same weights
     from swarmloc.agents.mappo_policy import (
         BETA_MAX,
-        WEIGHTS_DIR,
         MappoPolicy,
         load_actor,
+        shipped_weights,
         weights_kinds,
     )
     from swarmloc.agents.smoothing import MarkovSmoothing
 
-    weights = Path(runs.weights.get("mappo") or WEIGHTS_DIR / "mappo.pt")
+    weights = Path(runs.weights.get("mappo") or shipped_weights("mappo", runs.version))
     actor, kinds = load_actor(weights), weights_kinds(weights)  # as the registered ``mappo`` builds it
     rows = []
     for gamma, paper in PAPER["table8"].items():
@@ -318,7 +320,7 @@ def reproduce_madrl(out: str | os.PathLike[str] = "madrl.md", seeds: int = 32, t
     Returns:
         The path of the report.
     """
-    from swarmloc.agents.mappo_policy import WEIGHTS_DIR, weights_metadata
+    from swarmloc.agents.mappo_policy import shipped_weights, weights_metadata
 
     if version not in FAULT_TEXT:
         raise ValueError(f"version must be one of {sorted(FAULT_TEXT)}, got {version!r}")
@@ -329,10 +331,10 @@ def reproduce_madrl(out: str | os.PathLike[str] = "madrl.md", seeds: int = 32, t
     path = Path(out)
     if path.is_dir() or path.suffix == "":
         path = path / "madrl.md"
-    w_main = Path(weights) if weights else WEIGHTS_DIR / "mappo.pt"
+    w_main = Path(weights) if weights else shipped_weights("mappo", version)
     if not w_main.is_file():
         raise FileNotFoundError(f"MAPPO weights {w_main} not found; train them with `swarmloc train mappo`")
-    w_acc = Path(accuracy_only_weights) if accuracy_only_weights else WEIGHTS_DIR / "mappo_accuracy_only.pt"
+    w_acc = Path(accuracy_only_weights) if accuracy_only_weights else shipped_weights("mappo-accuracy-only", version)
     have_acc = w_acc.is_file()
     mappo_names = ("mappo", "mappo-no-smoothing", "mappo-no-isolation")
     runs = Runs(seeds=[TEST_SEED_START + i for i in range(seeds)],

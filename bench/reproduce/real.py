@@ -297,9 +297,9 @@ def _render(suite: Suite, methods: list[str], real: dict, simulated: dict, diagn
     learned = [m for m in methods if "mappo" in m or m == "pf-nn"]
     if "chi2-gate" in col and learned:
         lines += ["", "## What simulation training buys on real data", "",
-                  ("The learned methods are trained in simulation only: `mappo` and its ablations on the v0 tasks, "
-                   "`mappo-set-gru` on the v1 randomized families, `pf-nn` on the Indoor task of the flight's "
-                   "version (none saw TDOA). "
+                  ("The learned methods are trained in simulation only: `mappo`, its ablations and `mappo-set-gru` "
+                   "on the v1 randomized families (the weights of the flight's benchmark version), `pf-nn` on the "
+                   "Indoor task of the flight's version (none saw TDOA). "
                   "Gain over chi2-gate = log2(RMSE_chi2-gate / RMSE): +1 is half the error, −1 twice it. "
                   "Mean over the real TDOA flights beside the same on the simulated twin `TDOA-v1` and against "
                   "uniform."), ""]
