@@ -10,7 +10,8 @@
 
 A factory is called with no argument, or with ``weights=<path>`` when a weights file is
 given, and with ``version=<benchmark version>`` when the caller names the version of the
-tasks it will run and the factory takes a ``version`` argument: a learned method ships one
+tasks it will run and the factory names a ``version`` parameter (a ``**kwargs`` of settings
+does not count): a learned method ships one
 set of weights per benchmark version (``shipped_for_version``), trained on that version's
 tasks, so that the frozen v0 results stay reproducible beside v1. The method it returns is
 a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B ``Estimator`` (has ``step``); its
@@ -204,12 +205,14 @@ def shipped_for_version(table: dict[int, Path], version: int | None) -> Path:
     return table[max(v for v in table if v <= version)]
 
 
-def _accepts(factory: Callable[..., Any], name: str) -> bool:
+def _accepts(factory: Callable[..., Any], name: str, *, by_var_keyword: bool = True) -> bool:
+    """Whether ``factory`` takes the keyword ``name``: as a named parameter, or through ``**kwargs``
+    when ``by_var_keyword`` (a ``**overrides`` of settings is no promise to understand ``version``)."""
     try:
         params = inspect.signature(factory).parameters
     except (TypeError, ValueError):
         return False
-    return name in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
+    return name in params or (by_var_keyword and any(p.kind is p.VAR_KEYWORD for p in params.values()))
 
 
 def _call_factory(factory: Callable[..., Any], weights: str | Path | None, text: str,
@@ -219,7 +222,7 @@ def _call_factory(factory: Callable[..., Any], weights: str | Path | None, text:
         if not _accepts(factory, "weights"):
             raise TypeError(f"a weights file was given but the factory of {text!r} takes no 'weights' argument")
         kwargs["weights"] = str(weights)
-    if version is not None and _accepts(factory, "version"):
+    if version is not None and _accepts(factory, "version", by_var_keyword=False):
         kwargs["version"] = int(version)
     return factory(**kwargs)
 

@@ -177,7 +177,8 @@ def test_registry_metadata_and_loading(tmp_path):
 
 
 def test_load_method_hands_the_benchmark_version_to_factories_that_take_it(tmp_path):
-    """``version=`` reaches a factory with a ``version`` (or ``**kwargs``) parameter and is left out otherwise."""
+    """``version=`` reaches a factory with a named ``version`` parameter and is left out otherwise, also for a
+    ``**overrides`` of settings (imm-arkf's would reject it)."""
     from swarmloc.agents.registry import shipped_for_version
 
     user = tmp_path / "versioned.py"
@@ -200,7 +201,8 @@ def test_load_method_hands_the_benchmark_version_to_factories_that_take_it(tmp_p
     )
     assert load_method(f"{user}:with_version", version=1).method.version == 1
     assert load_method(f"{user}:with_version").method.version is None
-    assert load_method(f"{user}:with_kwargs", version=0).method.version == 0
+    assert load_method(f"{user}:with_kwargs", version=0).method.version is None
+    assert load_method("imm-arkf", version=1).track == "B"
     assert load_method(f"{user}:plain", version=1).method.version == "none taken"
     table = {0: tmp_path / "v0.pt", 1: tmp_path / "v1.pt"}
     assert shipped_for_version(table, None) == table[1]
