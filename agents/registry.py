@@ -11,9 +11,9 @@
 A factory is called with no argument, or with ``weights=<path>`` when a weights file is
 given, and with ``version=<benchmark version>`` when the caller names the version of the
 tasks it will run and the factory names a ``version`` parameter (a ``**kwargs`` of settings
-does not count): a learned method ships one
-set of weights per benchmark version (``shipped_for_version``), trained on that version's
-tasks, so that the frozen v0 results stay reproducible beside v1. The method it returns is
+does not count). A learned method ships one set of weights per benchmark version
+(``shipped_for_version``), trained on that version's tasks, so that the frozen v0 results
+stay reproducible beside v1. The method it returns is
 a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B ``Estimator`` (has ``step``); its
 ``privileged`` and ``deterministic`` attributes are read (defaults False and True).
 
