@@ -13,9 +13,9 @@ given, and with ``version=<benchmark version>`` when the caller names the versio
 tasks it will run and the factory names a ``version`` parameter (a ``**kwargs`` of settings
 does not count). A learned method ships one set of weights per benchmark version
 (``shipped_for_version``), trained on that version's tasks, so that the frozen v0 results
-stay reproducible beside v1. The method it returns is
-a Track A ``LinkTrustPolicy`` (has ``act``) or a Track B ``Estimator`` (has ``step``); its
-``privileged`` and ``deterministic`` attributes are read (defaults False and True).
+stay reproducible beside v1. The method it returns is a Track A ``LinkTrustPolicy`` (has
+``act``) or a Track B ``Estimator`` (has ``step``); its ``privileged`` and
+``deterministic`` attributes are read (defaults False and True).
 
 Adding a shipped method: one :class:`MethodEntry` line in :data:`REGISTRY` with a lazy
 ``module:attr`` factory string (modules are imported only when the method is loaded, so
@@ -248,8 +248,8 @@ def load_method(text: str, weights: str | Path | None = None, version: int | Non
         text: ``name``, ``name+smooth``, ``package.module:factory`` or ``path/to/file.py:factory``.
         weights: optional weights file handed to the factory as ``weights=``.
         version: the benchmark version of the tasks the method will run (``TaskSpec.version``),
-            handed to a factory that takes ``version=`` (the shipped weights of that version);
-            None: the newest.
+            handed to a factory with a named ``version`` parameter (the shipped weights of that
+            version); None: the newest.
 
     Returns:
         The ``LoadedMethod``.
