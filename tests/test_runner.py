@@ -254,7 +254,8 @@ def test_evaluate_task_pins_torch_after_loading_the_method(monkeypatch):
 
     calls = []
     real_load = runner.load_method
-    monkeypatch.setattr(runner, "load_method", lambda text, weights=None, version=None: calls.append("load") or real_load(text, version=version))
+    monkeypatch.setattr(runner, "load_method",
+                        lambda text, weights=None, version=None: calls.append("load") or real_load(text, version=version))
     monkeypatch.setattr(runner, "pin_torch_threads", lambda: calls.append("pin"))
     evaluate_task(["uniform"], get_spec("swarmloc/Ideal-v0", duration=0.5), [1])
     assert calls[:2] == ["load", "pin"]

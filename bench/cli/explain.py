@@ -58,10 +58,10 @@ def run(opts: Options) -> int:
     started = time.perf_counter()
     overrides = {} if opts.duration is None else {"duration": opts.duration}
     try:
-        method = load_method(opts.method, opts.weights, version=get_spec(opts.task).version)
-        ex = explain(method, opts.task, [opts.seed], explainer=opts.explainer, baseline=opts.baseline,
-                     channels=opts.channels or None, n_samples=opts.samples, reference=opts.reference or None,
-                     **overrides)
+        spec = get_spec(opts.task, **overrides)
+        method = load_method(opts.method, opts.weights, version=spec.version)
+        ex = explain(method, spec, [opts.seed], explainer=opts.explainer, baseline=opts.baseline,
+                     channels=opts.channels or None, n_samples=opts.samples, reference=opts.reference or None)
         opts.out.mkdir(parents=True, exist_ok=True)
         figure = plot_chain(ex, opts.out / "figure.png", opts.uav)
     except (KeyError, ValueError, TypeError, FileNotFoundError) as err:
