@@ -166,19 +166,26 @@ def test_task_variants_and_the_split_comparison():
     assert K.task_variant("swarmloc/NLOSStep-v0") == ("NLOSStep", "fixed")
     assert K.methods_for("swarmloc/HybridNoiseRandom-v1")[-2:] == K.IMM and "imm-kf" not in K.methods_for("Ideal-v0")
 
-    def result(task, split, uniform, best):
-        def ci(m):
-            return {"mean": m, "ci": [m - 0.1, m + 0.1], "n": 4}
+    seeds = [10, 11, 12, 13, 14, 15]
 
-        return {"task": task, "split": split, "family": "Cascaded", "best_classical": "huber",
-                "rmse": {"uniform": ci(uniform), "huber": ci(best)}}
+    def result(task, split):
+        return {"task": task, "split": split, "family": "Cascaded", "best_classical": "huber", "seeds": seeds,
+                "rmse": {m: C.mean_ci(v) for m, v in per_seed[task].items()}}
 
-    rows = K.split_comparison([result("swarmloc/CascadedFaultRandom-v1", "random", 2.0, 1.0),
-                               result("swarmloc/CascadedFaultRandomShifted-v1", "shifted", 3.0, 1.15)])
+    inside, shifted = "swarmloc/CascadedFaultRandom-v1", "swarmloc/CascadedFaultRandomShifted-v1"
+    spread = np.array([1.0, 4.0, 2.0, 8.0, 3.0, 6.0])  # the seeds differ far more than the splits do
+    per_seed = {inside: {"uniform": spread, "huber": spread / 2},
+                # uniform: 10 % worse on every seed; huber: 10 % better on half the seeds, 10 % worse on the rest
+                shifted: {"uniform": spread * 1.1, "huber": spread / 2 * np.array([1.1, 0.9, 1.1, 0.9, 1.1, 0.9])}}
+    rows = K.split_comparison([result(inside, "random"), result(shifted, "shifted")], per_seed)
     (row,) = rows
-    assert row["uniform"]["ratio"] == pytest.approx(1.5) and row["uniform"]["harder"]
-    assert row["best_classical"]["ratio"] == pytest.approx(1.15) and not row["best_classical"]["harder"]
-    assert not row["harder"]  # the CIs of the best classical method overlap
+    u, h = row["uniform"], row["best_classical"]
+    assert row["paired_seeds"] == 6 and u["ratio"] == pytest.approx(1.1)
+    # the task-mean CIs overlap, but paired on the seed the shifted split is harder on every seed
+    assert u["shifted"]["ci"][0] < u["in_distribution"]["ci"][1]
+    assert u["paired_log2"]["mean"] == pytest.approx(np.log2(1.1)) and u["harder"]
+    assert h["paired_log2"]["ci"][0] < 0 < h["paired_log2"]["ci"][1] and not h["harder"]
+    assert not row["harder"]  # harder needs both
 
 
 def test_plain_makes_json_numbers():

@@ -11,8 +11,8 @@ information bound ``bound_rmse`` per episode), and the report gives per task
   phenomenon, in ``calibration_phenomena``; Scale is judged across its swarm sizes);
 * for each randomized family with both splits (``<Family>Random-v1``, in-distribution, and
   ``<Family>RandomShifted-v1``, parameters outside the training ranges) whether the shifted
-  split is measurably harder for uniform and the best classical method (non-overlapping CIs
-  of the task means: the splits are different episodes, so nothing pairs);
+  split is measurably harder for uniform and the best classical method (the per-seed log
+  ratio shifted / in-distribution, paired on the shared test seeds, with its CI above 0);
 * the gap closed (score v1) of every method evaluated here and of every registered method
   whose shipped results (the suite's folder, ``leaderboard/results/standard-v1``) hold these
   tasks and seeds.
@@ -228,10 +228,24 @@ def family_results(results: list[dict[str, Any]], evidence: Mapping[str, Evidenc
     return {"Scale": verdict}
 
 
-def split_comparison(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Each shifted task beside its in-distribution twin: uniform and best classical, means, CIs, ratios.
+def split_comparison(results: Sequence[Mapping[str, Any]],
+                     per_seed: Mapping[str, Mapping[str, np.ndarray]]) -> list[dict[str, Any]]:
+    """Each shifted task beside its in-distribution twin: uniform and best classical, means, CIs, paired ratios.
 
-    ``harder`` for a method: the shifted task's CI lies wholly above the in-distribution one's.
+    The two tasks of a family run the same test seeds, and a seed keys every draw of the
+    world (counter-based streams), so the seed pairs them: per seed
+    ``d = log2(RMSE_shifted / RMSE_in-distribution)`` of the method (the best classical method
+    of each split on its split), whose mean and bootstrap CI say how much harder the shifted
+    split is. Pairing is valid whatever the correlation (the seeds are independent draws) and
+    removes the between-seed spread the two task means share.
+
+    Args:
+        results: the tasks' results (``task_result``).
+        per_seed: task → method → per-seed RMSE, in the order of that task's ``seeds``.
+
+    Returns:
+        One row per family with both splits; ``harder`` for a method: the CI of its mean ``d``
+        lies above 0; the row's ``harder``: for uniform and for the best classical method.
     """
     by_label = {task_label(r["task"]): r for r in results}
     rows = []
@@ -241,14 +255,19 @@ def split_comparison(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any
         inside = by_label.get(task_label(shifted["task"]).removesuffix("Shifted"))
         if inside is None:
             continue
+        common = sorted(set(inside["seeds"]) & set(shifted["seeds"]))
         row: dict[str, Any] = {"family": shifted["family"], "in_distribution": inside["task"],
-                               "shifted": shifted["task"]}
+                               "shifted": shifted["task"], "paired_seeds": len(common)}
         for role in ("uniform", "best_classical"):
             a_m = "uniform" if role == "uniform" else inside["best_classical"]
             b_m = "uniform" if role == "uniform" else shifted["best_classical"]
             a, b = inside["rmse"][a_m], shifted["rmse"][b_m]
+            a_seed = dict(zip(inside["seeds"], per_seed[inside["task"]][a_m]))
+            b_seed = dict(zip(shifted["seeds"], per_seed[shifted["task"]][b_m]))
+            d = C.mean_ci(np.log2([b_seed[s] / a_seed[s] for s in common])) if len(common) >= 2 else None
             row[role] = {"in_distribution": {"method": a_m, **a}, "shifted": {"method": b_m, **b},
-                         "ratio": b["mean"] / a["mean"], "harder": b["ci"][0] > a["ci"][1]}
+                         "ratio": b["mean"] / a["mean"], "paired_log2": d,
+                         "harder": d is not None and d["ci"][0] > 0.0}
         row["harder"] = row["uniform"]["harder"] and row["best_classical"]["harder"]
         rows.append(row)
     return rows
@@ -362,7 +381,7 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         methods.update({m: {"source": "shipped", **v} for m, v in shipped.items()})
     n_episodes = sum(len(seeds[t]) for t in tasks)
     return {
-        "tasks": results, "families": families, "splits": split_comparison(results),
+        "tasks": results, "families": families, "splits": split_comparison(results, {t: ev.rmse for t, ev in evidence.items()}),
         "headroom": C.headroom_overall(fault), "gap_closed": gap_closed_table(methods, tasks),
         "shipped_methods": sorted(shipped), "shipped_dir": _shown_path(folder), "overrides": dict(overrides or {}),
         "unsupported": {t: dict(o.unsupported) for t, o in outcomes.items() if o.unsupported},
