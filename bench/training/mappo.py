@@ -86,10 +86,14 @@ TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/ma
                  "bench/training/mappo.py")
 
 
-def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name: str = "mappo"):
-    """An ``evaluate(policy)`` callback: smoothed policy on ``n_seeds`` dev seeds of ``tasks`` (task → metric).
+def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name: str = "mappo",
+                  smoothed: bool = True):
+    """An ``evaluate(policy)`` callback: the policy as it executes on ``n_seeds`` dev seeds of ``tasks`` (task → metric).
 
-    Returns a function mapping an unsmoothed ``MappoPolicy`` to
+    ``smoothed``: wrap it in the adaptive Markov smoothing, as ``mappo`` executes (``mappo-set-gru``
+    executes unsmoothed).
+
+    Returns a function mapping an unsmoothed policy (``MappoPolicy`` or ``SetGruPolicy``) to
     ``{"<Task>/<metric>": value, "<Task>/<metric>_vs_uniform": ratio}`` (means over seeds).
     """
     from swarmloc.agents.registry import LoadedMethod, load_method
@@ -101,7 +105,7 @@ def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name:
     uniform: dict[str, float] = {}
 
     def evaluate(policy) -> dict[str, float]:
-        method = MarkovSmoothing(policy, BETA_MAX, SMOOTHING_GAMMA)
+        method = MarkovSmoothing(policy, BETA_MAX, SMOOTHING_GAMMA) if smoothed else policy
         loaded = LoadedMethod(name=method_name, entry_point="(training snapshot)", track="A",
                               privileged=False, deterministic=True, method=method)
         out: dict[str, float] = {}
@@ -145,7 +149,8 @@ def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
         method = "mappo-accuracy-only" if config.accuracy_only else "mappo"
         default_name = "mappo.pt"
     check_training_seeds([config.seed])
-    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method) if config.eval_seeds > 0 else None
+    evaluate = (dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method, smoothed=method != "mappo-set-gru")
+                if config.eval_seeds > 0 else None)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
