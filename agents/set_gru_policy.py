@@ -210,6 +210,6 @@ class SetGruPolicy:
 
 
 def mappo_set_gru(weights: str | Path | None = None) -> SetGruPolicy:
-    """``mappo-set-gru``: shipped weights, the deterministic set + GRU actor, its trust unsmoothed (module docstring)."""
+    """``mappo-set-gru``: shipped weights, the deterministic set + GRU actor, unsmoothed (module docstring)."""
     path = Path(weights) if weights is not None else WEIGHTS_DIR / "mappo_set_gru.pt"
     return SetGruPolicy(load_set_gru_actor(path), kinds=weights_kinds(path))

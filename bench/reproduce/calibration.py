@@ -380,8 +380,9 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         shipped = shipped_episodes(folder, tasks, seeds, reference, skip=list(methods))
         methods.update({m: {"source": "shipped", **v} for m, v in shipped.items()})
     n_episodes = sum(len(seeds[t]) for t in tasks)
+    splits = split_comparison(results, {t: ev.rmse for t, ev in evidence.items()})
     return {
-        "tasks": results, "families": families, "splits": split_comparison(results, {t: ev.rmse for t, ev in evidence.items()}),
+        "tasks": results, "families": families, "splits": splits,
         "headroom": C.headroom_overall(fault), "gap_closed": gap_closed_table(methods, tasks),
         "shipped_methods": sorted(shipped), "shipped_dir": _shown_path(folder), "overrides": dict(overrides or {}),
         "unsupported": {t: dict(o.unsupported) for t, o in outcomes.items() if o.unsupported},

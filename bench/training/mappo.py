@@ -88,7 +88,9 @@ TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/ma
 
 def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name: str = "mappo",
                   smoothed: bool = True):
-    """An ``evaluate(policy)`` callback: the policy as it executes on ``n_seeds`` dev seeds of ``tasks`` (task → metric).
+    """An ``evaluate(policy)`` callback: the policy, as it executes, on ``n_seeds`` dev seeds of ``tasks``.
+
+    ``tasks`` maps each task to the metric it reports.
 
     ``smoothed``: wrap it in the adaptive Markov smoothing, as ``mappo`` executes (``mappo-set-gru``
     executes unsmoothed).
