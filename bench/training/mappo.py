@@ -144,15 +144,15 @@ def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
     if isinstance(config, SetGruConfig):
         from swarmloc.agents.mappo_set_gru import train
 
-        method, default_name = "mappo-set-gru", "mappo_set_gru.pt"
+        # the set + GRU actor executes unsmoothed (``agents/set_gru_policy.py``), the paper's actor smoothed
+        method, default_name, smoothed = "mappo-set-gru", "mappo_set_gru.pt", False
     else:
         from swarmloc.agents.mappo import train
 
         method = "mappo-accuracy-only" if config.accuracy_only else "mappo"
-        default_name = "mappo.pt"
+        default_name, smoothed = "mappo.pt", True
     check_training_seeds([config.seed])
-    evaluate = (dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method, smoothed=method != "mappo-set-gru")
-                if config.eval_seeds > 0 else None)
+    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method, smoothed) if config.eval_seeds > 0 else None
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
