@@ -152,7 +152,8 @@ def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
         method = "mappo-accuracy-only" if config.accuracy_only else "mappo"
         default_name, smoothed = "mappo.pt", True
     check_training_seeds([config.seed])
-    evaluate = dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method, smoothed) if config.eval_seeds > 0 else None
+    evaluate = (dev_evaluator(config.eval_seeds, eval_tasks(config.tasks), method, smoothed)
+                if config.eval_seeds > 0 else None)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     commit = source_commit(TRAINING_CODE)  # before training: the code that runs (HEAD may move while it does)
     result = train(config, evaluate=evaluate, check_seeds=check_training_seeds)
