@@ -6,8 +6,9 @@ standard-v1``, one per method; regenerate them with ``python -m swarmloc.leaderb
 --regenerate [METHOD ...]``); ``leaderboard/results/<method>.json`` are those of the frozen
 ``standard-v0`` (``--suite standard-v0``). They go into the store through the normal submit
 path with ``trust=True`` (no re-run: they are the reference methods) and every other check,
-so a fresh clone shows a populated leaderboard. Entries already in the store are left as
-they are.
+so a fresh clone shows a populated leaderboard. An entry already in the store with the same
+results is left as it is; one whose results differ from the shipped file (a release changed
+how the method runs, not its name or weights, so its hash is the same) is replaced.
 """
 
 from __future__ import annotations
@@ -36,11 +37,13 @@ WITHOUT_V1_RESULTS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class ShippedLoad:
-    """What ``load_shipped`` did: methods stored now, already present, and refused (with why)."""
+    """What ``load_shipped`` did: methods stored now (new, or replacing stale results), already
+    present with the same results, and refused (with why)."""
 
     stored: tuple[str, ...]
     present: tuple[str, ...]
     refused: tuple[tuple[str, str], ...]
+    replaced: tuple[str, ...] = ()
 
 
 def shipped_results(results_dir: Path | None = None) -> list[Path]:
@@ -51,7 +54,7 @@ def shipped_results(results_dir: Path | None = None) -> list[Path]:
 
 
 def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> ShippedLoad:
-    """Store every shipped results file not yet in ``store``.
+    """Store every shipped results file not yet in ``store``, and replace stored ones whose results changed.
 
     Args:
         store: an open leaderboard store.
@@ -61,7 +64,7 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
         A ``ShippedLoad`` summary. A file that fails validation is reported, not raised:
         the others still load.
     """
-    stored, present, refused = [], [], []
+    stored, present, refused, replaced = [], [], [], []
     for path in shipped_results(results_dir):
         results = load_results(path)
         name = results.method.name
@@ -71,15 +74,19 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
         metadata = {"name": name, "authors": "swarmloc reference", "track": results.method.track,
                     "privileged": results.method.privileged,
                     "description": f"shipped reference method {name!r}"}
+        hashes = {e.method_hash for e in store.entries(results.suite.name) if e.trusted}
         try:
-            submit(path, results.method.entry_point, metadata, trust=True, store=store)
+            receipt = submit(path, results.method.entry_point, metadata, trust=True, store=store,
+                             replace_reference=True)
         except DuplicateSubmission:
             present.append(name)
         except Exception as err:  # noqa: BLE001 - one bad file must not hide the others
             refused.append((path.name, str(err)))
         else:
             stored.append(name)
-    return ShippedLoad(tuple(stored), tuple(present), tuple(refused))
+            if receipt.entry.method_hash in hashes:
+                replaced.append(name)
+    return ShippedLoad(tuple(stored), tuple(present), tuple(refused), tuple(replaced))
 
 
 def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path:
@@ -106,7 +113,8 @@ def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path
     with LeaderboardStore(db_url) as store:
         loaded = load_shipped(store)
         if loaded.stored:
-            console.print(f"stored {len(loaded.stored)} shipped results file(s) ({', '.join(RESULTS_DIRS)})")
+            console.print(f"stored {len(loaded.stored)} shipped results file(s) ({', '.join(RESULTS_DIRS)})"
+                          + (f", replacing stale entries of {', '.join(loaded.replaced)}" if loaded.replaced else ""))
         for name, why in loaded.refused:
             console.print(f"[yellow]not stored {name}:[/yellow] {why}")
         print_leaderboard(store, console=console)

@@ -264,17 +264,23 @@ class LeaderboardStore:
         if existing is not None:
             raise duplicate_error(entry_point, method_hash, suite_name, suite_version, existing)
 
-    def add(self, entry: LeaderboardEntry) -> int:
+    def add(self, entry: LeaderboardEntry, *, replace_reference: bool = False) -> int:
         """Store a submission and its per-task aggregates in one transaction.
 
         Args:
             entry: The submission (its ``id`` is ignored).
+            replace_reference: a trusted entry (a shipped reference method) stored for the
+                same method hash and suite whose results differ from ``entry``'s is deleted in
+                the same transaction. A registered method's hash covers its name and weights,
+                not its code, so a release that changes how a reference method runs ships new
+                results under the same hash.
 
         Returns:
             The new submission ID.
 
         Raises:
-            DuplicateSubmission: same method hash and suite already stored.
+            DuplicateSubmission: same method hash and suite already stored (with the same
+                results, or not trusted, when ``replace_reference``).
         """
         columns = {c.key for c in SubmissionRow.__table__.columns} - {"id"}
         values = {k: getattr(entry, k) for k in columns if k not in ("score_mean", "score_iqm",
@@ -293,8 +299,12 @@ class LeaderboardStore:
                     session, entry.method_hash, entry.suite_name, entry.suite_version
                 )
                 if existing is not None:
-                    raise duplicate_error(entry.entry_point, entry.method_hash,
-                                          entry.suite_name, entry.suite_version, existing)
+                    stale = session.get(SubmissionRow, existing)
+                    if not (replace_reference and stale.trusted and stale.results_json != entry.results_json):
+                        raise duplicate_error(entry.entry_point, entry.method_hash,
+                                              entry.suite_name, entry.suite_version, existing)
+                    session.delete(stale)
+                    session.flush()
                 row = SubmissionRow(**values)
                 row.aggregates = [
                     TaskAggregateRow(task=task, metric=metric, **agg.model_dump())

@@ -165,6 +165,7 @@ def submit(
     suite_lookup: SuiteLookup | None = None,
     store: LeaderboardStore | None = None,
     rerun: Rerun = run_in_worker,
+    replace_reference: bool = False,
 ) -> SubmissionReceipt:
     """Validate, verify and store a submission.
 
@@ -196,6 +197,9 @@ def submit(
         store: An open store (overrides ``db_url``).
         rerun: What runs the sandboxed re-runs (see :func:`~swarmloc.leaderboard.verify.verify_results`;
             :func:`~swarmloc.leaderboard.ray_rerun.ray_rerun` for Ray tasks).
+        replace_reference: with ``trust``: a stored entry of the same shipped method and
+            suite whose results differ is replaced, in one transaction (see
+            :meth:`~swarmloc.leaderboard.store.LeaderboardStore.add`).
 
     Returns:
         A receipt with the new ID, the stored entry and the verification report.
@@ -217,13 +221,16 @@ def submit(
             f"trust=True skips verification only for the shipped reference methods "
             f"{sorted(SHIPPED_REFERENCE_METHODS)}; {entry_point!r} is not one of them"
         )
+    if replace_reference and not trust:
+        raise InvalidSubmission("replace_reference=True replaces a shipped reference method's entry; "
+                                "it needs trust=True")
     validated = validate_submission(submission, suite_lookup, size_limits)
     own_store = store is None
     active = store if store is not None else LeaderboardStore(db_url)
     try:
-        # Cheap check before spending time on verification; add() checks again atomically.
-        active.ensure_new(entry_point, validated.method_hash, validated.results.suite.name,
-                          validated.results.suite.version)
+        if not replace_reference:  # cheap check before spending time on verification; add() checks again atomically
+            active.ensure_new(entry_point, validated.method_hash, validated.results.suite.name,
+                              validated.results.suite.version)
         report = None
         if not trust:
             report = verify_results(
@@ -243,7 +250,7 @@ def submit(
                 rerun=rerun,
             )
         entry = build_entry(validated, report, trusted=trust)
-        new_id = active.add(entry)
+        new_id = active.add(entry, replace_reference=replace_reference)
         return SubmissionReceipt(id=new_id, entry=active.get(new_id), report=report,
                                  store_url=active.url)
     finally:

@@ -48,3 +48,42 @@ def test_shipped_results_populate_a_fresh_store_once(tmp_path):
         again = load_shipped(store)
         assert again.stored == () and sorted(again.present) == sorted(first.stored)
         assert store.count() == len(FILES)
+
+
+def test_a_shipped_method_whose_results_changed_replaces_its_stale_entry(tmp_path):
+    """A release that changes how a reference method runs, not its name or weights (so not its hash), ships new
+    results: loading them replaces the stored entry, once; a user's own entry of the same method is never replaced."""
+    import dataclasses
+    import shutil
+
+    from swarmloc.bench.evaluation.results import make_results, write_results
+
+    from swarmloc.leaderboard.errors import DuplicateSubmission, InvalidSubmission
+    from swarmloc.leaderboard.submit import submit
+
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    source = RESULTS_DIRS["standard-v0"] / "chi2-gate.json"
+    shutil.copy(source, shipped / "chi2-gate.json")
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as store:
+        assert load_shipped(store, shipped).stored == ("chi2-gate",)
+        (old,) = store.entries()
+        results = load_results(source)
+        episodes = [e.model_dump() for e in results.episodes]
+        for episode in episodes:
+            episode["metrics"]["rmse"] *= 0.5
+        write_results(shipped / "chi2-gate.json", make_results(results.method, results.suite, episodes))
+        loaded = load_shipped(store, shipped)
+        assert loaded.stored == loaded.replaced == ("chi2-gate",)
+        (new,) = store.entries()
+        assert new.method_hash == old.method_hash
+        assert new.task_aggregates != old.task_aggregates
+        again = load_shipped(store, shipped)
+        assert again.present == ("chi2-gate",) and again.replaced == () and store.count() == 1
+        with pytest.raises(InvalidSubmission, match="replace_reference"):
+            submit(source, metadata={"name": "chi2-gate"}, trust=False, replace_reference=True, store=store)
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'user.db'}") as store:  # an entry not trusted is never replaced
+        store.add(dataclasses.replace(old, trusted=False))
+        with pytest.raises(DuplicateSubmission):
+            store.add(new, replace_reference=True)
+        assert [e.task_aggregates for e in store.entries()] == [old.task_aggregates]
