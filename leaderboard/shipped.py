@@ -65,16 +65,22 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
         the others still load.
     """
     stored, present, refused, replaced = [], [], [], []
+    shipped: dict[str, dict[str, str]] = {}  # suite -> method hash -> results text of its trusted entries
     for path in shipped_results(results_dir):
         results = load_results(path)
         name = results.method.name
+        suite = results.suite.name
+        if suite not in shipped:
+            shipped[suite] = {e.method_hash: e.results_json for e in store.entries(suite) if e.trusted}
+        if path.read_text(encoding="utf-8") in shipped[suite].values():  # stored as shipped: nothing to check
+            present.append(name)
+            continue
         if name not in SHIPPED_REFERENCE_METHODS:
             refused.append((path.name, f"{name!r} is not a shipped reference method"))
             continue
         metadata = {"name": name, "authors": "swarmloc reference", "track": results.method.track,
                     "privileged": results.method.privileged,
                     "description": f"shipped reference method {name!r}"}
-        hashes = {e.method_hash for e in store.entries(results.suite.name) if e.trusted}
         try:
             receipt = submit(path, results.method.entry_point, metadata, trust=True, store=store,
                              replace_reference=True)
@@ -84,7 +90,7 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
             refused.append((path.name, str(err)))
         else:
             stored.append(name)
-            if receipt.entry.method_hash in hashes:
+            if receipt.entry.method_hash in shipped[suite]:
                 replaced.append(name)
     return ShippedLoad(tuple(stored), tuple(present), tuple(refused), tuple(replaced))
 
