@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import json
 import os
 import subprocess
@@ -12,7 +14,7 @@ import pytest
 from rich.console import Console
 
 from swarmloc.bench import cli
-from swarmloc.bench.evaluation.demo import run_demo
+from swarmloc.bench.evaluation.demo import PIPE_WIDTH, run_demo
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.runner import run_episodes
 from swarmloc.bench.evaluation.suites import Suite
@@ -117,11 +119,13 @@ def test_bench_speed_writes_json(tmp_path):
 
 def test_demo_tables(tmp_path):
     suite = Suite("tiny", "0", (("swarmloc/NLOSStep-v0", 1_000_000), ("swarmloc/NLOSStep-v0", 1_000_001)))
-    console = Console(record=True, width=160)
+    console = Console(record=True, width=PIPE_WIDTH)  # the demo's width on a pipe
     results = run_demo(["uniform", "chi2-soft", "oracle"], suite, tmp_path, workers=1, plots=False,
                        console=console)
     text = console.export_text()
     assert "NLOSStep" in text and "oracle†" in text
+    # each method's summary line keeps its score and CI on one line
+    assert re.search(r"│ chi2-soft +│ A +│ +1/1 +│ +\d+\.\d\d× +│ +\d+\.\d\d–\d+\.\d\d +│", text), text
     md = (tmp_path / "summary.md").read_text()
     assert "| chi2-soft | A |" in md and md.rstrip().splitlines()[-1].startswith("| oracle† |")
     assert sorted(p.name for p in (tmp_path / "results").glob("*.json")) == ["chi2-soft.json", "oracle.json",

@@ -108,6 +108,9 @@ def rmse_rows(all_results: dict[str, Results]) -> tuple[list[str], list[list[str
     return header, rows
 
 
+#: the width the tables are laid out for when the output is not a terminal: the summary's 14 columns need 153
+PIPE_WIDTH = 160
+
 SUMMARY_HEADER = ["method", "track", "tasks", "× uniform", "95% CI", "gap closed", "IQM g", "ms/step", "mJ/UAV",
                   "jitter", "α var", "detect", "diverged", "CPU [s]"]
 
@@ -116,7 +119,7 @@ def summary_cells(row: SummaryRow) -> list[str]:
     """Cells of one summary line (see :data:`SUMMARY_HEADER`)."""
     s = row.score
     return [row.method + ("†" if row.privileged else ""), row.track, row.tasks,
-            f"{s[0]:.2f}×" if s else "—", f"[{s[1]:.2f}, {s[2]:.2f}]" if s else "—",
+            f"{s[0]:.2f}×" if s else "—", f"{s[1]:.2f}–{s[2]:.2f}" if s else "—",
             "—" if row.gap_closed is None else f"{100 * row.gap_closed:.0f}%", _fmt(row.iqm_gain, 2),
             _fmt(row.delay_ms, 4),
             _fmt(row.energy_mj), _fmt(row.jitter), _fmt(row.weight_var), _fmt(row.detection),
@@ -163,7 +166,7 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
                      "CPU [s]: the method's evaluation time here"),
                title_style="bold")
     for j, name in enumerate(SUMMARY_HEADER):
-        t2.add_column(escape(name), justify="left" if j < 2 else "right", no_wrap=j in (0, 5))
+        t2.add_column(escape(name), justify="left" if j < 2 else "right", no_wrap=j in (0, 3, 4, 5))
     public, privileged = _ranked(all_results, cpu)
     for r in public:
         t2.add_row(*map(escape, summary_cells(r)))
@@ -227,7 +230,7 @@ def run_demo(methods: Sequence[str], suite: Suite, out: Path, workers: int = 2, 
     if console is None:
         console = Console()
         if not console.is_terminal:  # a pipe or file: do not squeeze the tables into 80 columns
-            console.width = max(console.width, 150)
+            console.width = max(console.width, PIPE_WIDTH)
     started = time.perf_counter()
     methods = loadable_methods(methods, console)
     out.mkdir(parents=True, exist_ok=True)
