@@ -11,9 +11,10 @@ from typing import Literal
 #: and one estimator per family that runs on every task (``mappo-set-gru``, about 2× mappo's
 #: cost, is on the leaderboard and one flag away),
 #: so that the main job stays short on a 2-core machine (the target is five minutes; measured
-#: 4 min 28 s with a fresh leaderboard store, warm numba cache: quick-v1 94 s + 38 s of plots,
-#: real-v1 86 s + 19 s, the leaderboard ≈ 28 s). The task-specific estimators (IMM, federated,
-#: CI-EKF, the other PFs) are on the leaderboard and one flag away.
+#: 4 min 52 s by `make demo` with a populated leaderboard store, warm numba cache: quick-v1 96 s
+#: + 46 s of plots, real-v1 103 s + 27 s, the leaderboard ≈ 15 s; `pf` is a third of quick-v1's
+#: CPU time). The task-specific estimators (IMM, federated, CI-EKF, the other PFs) are on the
+#: leaderboard and one flag away.
 DEMO_METHODS = ("uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "random",
                 "mappo", "dead-reckoning", "pf", "oracle")
 
