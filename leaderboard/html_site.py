@@ -101,7 +101,9 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
     n = len(board.tasks)
     heads: list[tuple[str, str, str]] = []  # (label, sort type, title)
     if ranked:
-        heads.append(("#", "number", "rank by score v1 (S)"))
+        heads.append(("#", "number", "rank by score v1 (S). In the ranked table: 1 + the methods ahead beyond doubt "
+                                     "(paired 95% CI of the difference in S above 0); a shared # is a tie the seeds "
+                                     "cannot break"))
     heads += [
         ("Method", "text", "method name"),
         ("Track", "text", "A: link trust, B: full estimator"),
@@ -128,7 +130,8 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
     for standing in standings:
         entry, score = standing.entry, standing.score
         k, _ = standing.coverage(n)
-        cells = [f"<td class=\"num\" data-value=\"{standing.rank}\">{standing.rank}</td>"] if ranked else []
+        shown = standing.separable_rank if standing.separable_rank is not None else standing.rank
+        cells = [f"<td class=\"num\" data-value=\"{standing.rank}\">{shown}</td>"] if ranked else []
         low_high = score.times_ci if score else None
         cells += [
             f"<td data-value=\"{_e(entry.name.casefold())}\">"

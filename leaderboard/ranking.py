@@ -13,6 +13,12 @@ Entries then fall into three tables:
 
 Ties go to the higher IQM of the gains, then to the older submission.
 
+**Separable rank.** The order by S says nothing of whether the seeds can tell two neighbours
+apart. Each ranked method also gets ``1 +`` the number of ranked methods ahead of it beyond
+doubt: the 95 % CI of their paired difference in S (same tasks, same seeds; stratified
+bootstrap) lies above 0 (:func:`swarmloc.bench.evaluation.score.separable_ranks`). The views
+show it as the rank; methods that share it are not told apart by the suite.
+
 **The uniform fallback.** Score v1 needs ``uniform_rmse`` per episode (results schema 2). A
 results file without it (schema 1, e.g. the shipped standard-v0 results until they are
 regenerated) takes it from the suite's stored ``uniform`` entry (entry point ``uniform``,
@@ -33,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from swarmloc.bench.evaluation.families import group_by_family, short_task, task_label
-from swarmloc.bench.evaluation.score import SuiteScore, suite_score
+from swarmloc.bench.evaluation.score import SuiteScore, separable_ranks, suite_score
 from swarmloc.leaderboard.store import LeaderboardEntry
 
 SuiteKey = tuple[str, str]
@@ -51,12 +57,15 @@ class Standing:
         score: its score v1 (None when no task has a gain: no ``uniform_rmse`` and no reference).
         rank: 1-based place in its table (None for privileged methods).
         filled: episodes whose ``uniform_rmse`` came from the suite's ``uniform`` entry.
+        separable_rank: in the ranked table, 1 + the ranked methods ahead of it beyond doubt
+            (see the module docstring); None elsewhere.
     """
 
     entry: LeaderboardEntry
     score: SuiteScore | None
     rank: int | None
     filled: int
+    separable_rank: int | None = None
 
     @property
     def full(self) -> bool:
@@ -175,7 +184,9 @@ def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry]) ->
         standings.append(Standing(entry, suite_score(filled_episodes, tasks), None, filled))
     standings.sort(key=_order_key)
     public = [s for s in standings if not s.entry.privileged]
-    ranked = [Standing(s.entry, s.score, i, s.filled) for i, s in enumerate((s for s in public if s.full), 1)]
+    full = [s for s in public if s.full]
+    separable = separable_ranks([s.score for s in full if s.score is not None])
+    ranked = [Standing(s.entry, s.score, i, s.filled, r) for i, (s, r) in enumerate(zip(full, separable), 1)]
     partial = [Standing(s.entry, s.score, i, s.filled) for i, s in enumerate((s for s in public if not s.full), 1)]
     return SuiteBoard(name, version, tasks, tuple(ranked), tuple(partial),
                       tuple(s for s in standings if s.entry.privileged), reference)

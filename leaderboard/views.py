@@ -130,7 +130,8 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
     for standing in standings:
         score = standing.score
         k, n = standing.coverage(n_tasks)
-        cells = [Text(str(standing.rank))] if ranked else []
+        shown = standing.separable_rank if standing.separable_rank is not None else standing.rank
+        cells = [Text(str(shown))] if ranked else []
         ci = "—" if score is None else "–".join(fmt_times(x) for x in score.times_ci)
         cells += [Text(standing.entry.name), Text(standing.entry.track),
                   Text(fmt_times(score.times if score else None)), Text(ci),
@@ -183,7 +184,8 @@ def board_tables(board: SuiteBoard, family: str | None = None,
                 _rich_table(board.privileged, columns, n, ranked=False)]
     what = "family" if family is None and tasks is None else "task"
     legend = (f"2^S: × lower error than the standard CEKF (uniform), geometric mean over tasks, stratified-"
-              f"bootstrap 95% CI. Gap: share of the achievable gain (to the information bound) closed, mean "
+              f"bootstrap 95% CI. #: 1 + the methods ahead beyond doubt (paired 95% CI of the difference in S "
+              f"above 0); methods that share a # are not told apart by the seeds. Gap: share of the achievable gain (to the information bound) closed, mean "
               f"over tasks where it is defined. Tasks: covered/total. {what.capitalize()} columns: × uniform "
               f"over the {what}'s tasks (* some not covered).")
     if board.filled:
@@ -253,6 +255,7 @@ def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
                     "trusted": entry.trusted,
                     "table": table,
                     "partial_rank": standing.rank if table == "partial" else None,
+                    "separable_rank": standing.separable_rank,
                     "times_uniform": score.times if score else None,
                     "times_ci_low": score.times_ci[0] if score else None,
                     "times_ci_high": score.times_ci[1] if score else None,
@@ -295,7 +298,8 @@ def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | N
     """The leaderboard as CSV or JSON text.
 
     One row per submission, in board order: suite, rank (empty outside the ranked table),
-    metadata, ``table`` (``ranked``, ``partial`` or ``privileged``) and ``partial_rank``,
+    metadata, ``table`` (``ranked``, ``partial`` or ``privileged``), ``partial_rank`` and
+    ``separable_rank`` (1 + the ranked methods ahead beyond doubt; empty outside the ranked table),
     score v1 (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
     ``tasks_covered``/``tasks_total``, ``uniform_rmse_filled`` — episodes scored through the
     uniform fallback), the v0 normalized score (``v0_score_*``), mean delay/energy/jitter,

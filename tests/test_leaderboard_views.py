@@ -146,7 +146,7 @@ def test_terminal_view_columns_and_legend(store: LeaderboardStore) -> None:
     assert "Tasks" not in ranked_header and "covering all 3 tasks" in text
     assert "4.00" in text  # quarter-no-step covers NLOS-v0 only of its family: 2^2 with a star
     assert "4.00*" in text
-    assert "taken from the stored uniform entry" in text
+    assert "taken from the stored uniform entry" in " ".join(text.split())  # the legend wraps
     per_task = _render(views.leaderboard_tables(store, family="nlos"))
     assert "Step" in per_task and "Ideal" not in per_task  # the NLOS tasks only
     with pytest.raises(ValueError, match=r"unknown task family 'Optics'; this suite's families: Ideal, NLOS"):
@@ -271,3 +271,20 @@ def test_method_styles_are_stable_and_distinct() -> None:
     assert len(set(many.values())) == 84  # never two alike
     assert many["uniform"] == shipped["uniform"]  # hashed names never push a shipped method away
     assert math.isclose(len({s.colour for s in method_styles([f"x{i}" for i in range(20)]).values()}), 20)
+
+
+def test_methods_the_seeds_cannot_tell_apart_share_their_rank(tmp_path: Path) -> None:
+    """The rank shown is 1 + the methods ahead beyond doubt (paired CI): a copy of uniform ties with it."""
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as s:
+        for i, (name, factor) in enumerate([("uniform", 1.0), ("uniform-copy", 1.0), ("half", 0.5), ("double", 2.0)]):
+            s.add(_entry(name, _scaled(factor), i=i))
+        (board,) = suite_boards(s.entries())
+        assert [(st.rank, st.separable_rank, st.entry.name) for st in board.ranked] == [
+            (1, 1, "half"), (2, 2, "uniform"), (3, 2, "uniform-copy"), (4, 4, "double")]
+        text = _render(views.leaderboard_tables(s))
+        rows = [line.split()[:2] for line in text.splitlines() if line.split()[1:2] in (["uniform"], ["uniform-copy"])]
+        assert rows == [["2", "uniform"], ["2", "uniform-copy"]]
+        assert "methods that share a # are not told apart by the seeds" in " ".join(text.split())
+        exported = json.loads(views.export(s, "json"))
+        assert [(r["name"], r["rank"], r["separable_rank"]) for r in exported] == [
+            ("half", 1, 1), ("uniform", 2, 2), ("uniform-copy", 3, 2), ("double", 4, 4)]

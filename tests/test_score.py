@@ -86,3 +86,44 @@ def test_probability_of_improvement_by_hand():
     assert S.probability_of_improvement({"A": np.array([3.0])}, {"A": np.zeros(4)}) == 1.0
     with pytest.raises(ValueError, match="share no task"):
         S.probability_of_improvement({"A": np.ones(1)}, {"B": np.ones(1)})
+
+
+def _suite(gains_by_task: dict[str, list[float]], seeds: list[int] | None = None) -> S.SuiteScore:
+    """A method's suite score from its per-seed gains (uniform RMSE 1, RMSE 2^-g)."""
+    eps = [_ep(task, (seeds or list(range(len(g))))[i], 2.0 ** -x, 1.0)
+           for task, g in gains_by_task.items() for i, x in enumerate(g)]
+    return S.suite_score(eps)
+
+
+def test_separable_ranks_pair_the_episodes():
+    common = {"A": [-3.0, 0.0, 3.0, -1.0, 1.0, 2.0], "B": [2.0, -2.0, 0.5, -0.5, 1.5, -1.5]}
+    shift = lambda d: {t: [x + d for x in g] for t, g in common.items()}  # noqa: E731
+    # a lead of 0.05 on every episode is beyond doubt although each method's own CI spans ±1
+    lead, base = _suite(shift(0.05)), _suite(shift(0.0))
+    assert lead.ci_low < base.S < lead.S < base.ci_high
+    assert S.separable_ranks([lead, base]) == [1, 2]
+    assert S.separable_ranks([base, lead]) == [2, 1]
+    # the same gains: nobody is ahead
+    assert S.separable_ranks([base, _suite(shift(0.0)), _suite(shift(0.0))]) == [1, 1, 1]
+    # A ahead of B on every episode; C level with both (its own noise swamps a 0.1 lead either way): 1, 2, 1
+    noise = {t: [x + (3.0 if i % 2 else -3.0) for i, x in enumerate(g)] for t, g in shift(0.1).items()}
+    assert S.separable_ranks([_suite(shift(0.2)), base, _suite(noise)]) == [1, 2, 1]
+
+
+def test_separable_ranks_refuse_what_does_not_pair():
+    a = _suite({"A": [1.0, 2.0]}, seeds=[1, 2])
+    with pytest.raises(ValueError, match="different seeds"):
+        S.separable_ranks([a, _suite({"A": [1.0, 2.0]}, seeds=[1, 3])])
+    with pytest.raises(ValueError, match="cover B"):
+        S.separable_ranks([_suite({"A": [1.0, 2.0], "B": [0.0, 0.0]}), _suite({"A": [1.0, 2.0]})])
+    # seed order does not matter: the episodes are matched by seed
+    assert S.separable_ranks([_suite({"A": [1.0, 2.0, 3.0]}, seeds=[5, 6, 7]),
+                              _suite({"A": [2.5, 1.5, 0.5]}, seeds=[7, 6, 5])]) == [1, 2]
+
+
+def test_the_bootstrap_seed_is_not_the_episode_seed():
+    # the CI depends on the gains and the bootstrap's own seed, never on which seeds the episodes ran
+    gains = {"A": [0.3, -1.2, 2.0, 0.1], "B": [1.0, 0.0, -0.5, 4.0]}
+    a, b = _suite(gains, seeds=[0, 1, 2, 3]), _suite(gains, seeds=[9000, 9001, 9002, 9003])
+    assert (a.ci_low, a.ci_high) == (b.ci_low, b.ci_high)
+    assert (a.ci_low, a.ci_high) == pytest.approx(S.bootstrap_suite_ci([np.array(g) for g in gains.values()]))

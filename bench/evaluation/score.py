@@ -54,10 +54,11 @@ class TaskScore:
 
     Attributes:
         task: task ID.
-        gains: ``(n,)`` per-seed gains g, in seed order.
+        gains: ``(n,)`` per-seed gains g, in the order the episodes came.
         mean: ``G_t``, the mean gain.
         achievable: ``A_t`` = mean log2(RMSE_uniform / bound), None where the bound is undefined.
         gap_closed: ``G_t / A_t`` where ``A_t ≥ log2 1.25``, else None.
+        seeds: ``(n,)`` the episode seed of each gain (None when not given): what pairs two methods.
     """
 
     task: str
@@ -65,6 +66,7 @@ class TaskScore:
     mean: float
     achievable: float | None
     gap_closed: float | None
+    seeds: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -104,13 +106,15 @@ class SuiteScore:
         return len(self.tasks), len(self.tasks) + len(self.uncovered)
 
 
-def task_score(task: str, gains: Sequence[float], achievable: Sequence[float | None] | None = None) -> TaskScore:
+def task_score(task: str, gains: Sequence[float], achievable: Sequence[float | None] | None = None,
+               seeds: Sequence[int] | None = None) -> TaskScore:
     """``G_t``, ``A_t`` and gap closed of one task from its per-seed gains and achievable gains.
 
     Args:
         task: task ID.
         gains: per-seed g (all defined).
         achievable: per-seed log2(RMSE_uniform / bound); ``A_t`` is None if any is None.
+        seeds: the seed of each gain (kept for pairing methods).
     """
     g = np.asarray(gains, dtype=np.float64)
     if g.size == 0 or not np.isfinite(g).all():
@@ -120,7 +124,10 @@ def task_score(task: str, gains: Sequence[float], achievable: Sequence[float | N
     if achievable is not None and len(achievable) and all(v is not None for v in achievable):
         a = float(np.mean(np.asarray(achievable, dtype=np.float64)))
     closed = mean / a if a is not None and a >= MIN_ACHIEVABLE_GAIN else None
-    return TaskScore(task=task, gains=g, mean=mean, achievable=a, gap_closed=closed)
+    seed_arr = None if seeds is None else np.asarray(seeds, dtype=np.int64)
+    if seed_arr is not None and seed_arr.shape != g.shape:
+        raise ValueError(f"task {task}: {seed_arr.size} seeds for {g.size} gains")
+    return TaskScore(task=task, gains=g, mean=mean, achievable=a, gap_closed=closed, seeds=seed_arr)
 
 
 def bootstrap_suite_ci(tasks: Sequence[np.ndarray], n_resamples: int = DEFAULT_RESAMPLES,
@@ -163,7 +170,7 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
     Returns:
         The ``SuiteScore``, or None when the method covers no task.
     """
-    by_task: dict[str, list[tuple[float | None, float | None]]] = {}
+    by_task: dict[str, list[tuple[float | None, float | None, int]]] = {}
     order: list[str] = []
     for ep in episodes:
         task = str(ep["task"] if isinstance(ep, Mapping) else ep.task)
@@ -174,13 +181,14 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
             order.append(task)
         gain = episode_gain(m.get("uniform_rmse"), m.get("rmse"))
         bound = m.get("bound_rmse")
-        by_task[task].append((gain, episode_gain(m.get("uniform_rmse"), bound) if bound else None))
+        episode_seed = int(ep["seed"] if isinstance(ep, Mapping) else ep.seed)
+        by_task[task].append((gain, episode_gain(m.get("uniform_rmse"), bound) if bound else None, episode_seed))
     all_tasks = list(suite_tasks) if suite_tasks is not None else order
     covered: dict[str, TaskScore] = {}
     for task in all_tasks:
         rows = by_task.get(task, [])
-        if rows and all(g is not None for g, _ in rows):
-            covered[task] = task_score(task, [g for g, _ in rows], [a for _, a in rows])
+        if rows and all(g is not None for g, _, _ in rows):
+            covered[task] = task_score(task, [g for g, _, _ in rows], [a for _, a, _ in rows], [s for _, _, s in rows])
     if not covered:
         return None
     S = float(np.mean([t.mean for t in covered.values()]))
@@ -192,6 +200,55 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
     return SuiteScore(S=S, ci_low=low, ci_high=high, iqm=iqm(np.concatenate([t.gains for t in covered.values()])),
                       gap_closed=closed, tasks=covered,
                       uncovered=tuple(t for t in all_tasks if t not in covered))
+
+
+def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED,
+                    confidence: float = 0.95) -> list[int]:
+    """Each method's rank as 1 + the number of others whose S is higher beyond doubt.
+
+    "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0. The CI
+    is a stratified bootstrap that draws the seeds of each task once and applies that draw to
+    every method, so two methods are compared episode by episode (same task, same seed: the
+    same world). Two methods whose difference the seeds cannot resolve share a rank. Ranks
+    are not always consecutive: with A ahead of B beyond doubt and C level with both, the
+    ranks are 1, 2, 1.
+
+    Args:
+        scores: suite scores covering the same tasks with the same seeds (every method of a
+            suite's ranked table does).
+        n_resamples, seed: of the bootstrap.
+        confidence: of the CI, in (0, 1).
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    if not scores:
+        return []
+    tasks = list(scores[0].tasks)
+    rng = np.random.default_rng(seed)
+    resampled = np.zeros((len(scores), n_resamples))
+    for task in tasks:
+        aligned = []
+        for score in scores:
+            t = score.tasks.get(task)
+            if t is None or t.seeds is None:
+                raise ValueError(f"every score must cover {task} with its seeds to be paired")
+            order = np.argsort(t.seeds, kind="stable")
+            if aligned and not np.array_equal(t.seeds[order], aligned[0][0]):
+                raise ValueError(f"{task}: the scores ran different seeds; only the same episodes pair")
+            aligned.append((t.seeds[order], t.gains[order]))
+        picks = rng.integers(0, aligned[0][0].size, size=(n_resamples, aligned[0][0].size))
+        for i, (_, gains) in enumerate(aligned):
+            resampled[i] += gains[picks].mean(axis=1)
+    if any(set(score.tasks) != set(tasks) for score in scores):
+        raise ValueError("the scores cover different tasks; only the same episodes pair")
+    resampled /= len(tasks)  # each row: resampled S of one method
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    ranks = []
+    for i in range(len(scores)):
+        low = np.percentile(resampled - resampled[i], tail, axis=1)  # (methods,): the lower CI end of each lead
+        ranks.append(1 + int(np.sum(low > 0.0)))
+    return ranks
 
 
 def performance_profile(gains_by_task: Mapping[str, np.ndarray], taus: Sequence[float]) -> np.ndarray:
