@@ -57,7 +57,6 @@ def test_a_shipped_method_whose_results_changed_replaces_its_stale_entry(tmp_pat
     import shutil
 
     from swarmloc.bench.evaluation.results import make_results, write_results
-
     from swarmloc.leaderboard.errors import DuplicateSubmission, InvalidSubmission
     from swarmloc.leaderboard.submit import submit
 
