@@ -17,6 +17,7 @@ monitoring (``cusum``, ``raim``) are in ``integrity.py`` (docs/methods.md).
 | ``chi2-gate`` | α = α_min if NIS > χ²₀.₉₅(dof) else 1 | hard χ² gate |
 | ``chi2-soft`` | α = 1 if λ < χ²₀.₉₅(dof) else exp(−(λ − χ²)/(2σ²)) | dtvirm §3.7 |
 | ``federated-coef`` | α = R0 / R_k from the allocation coefficient | federated eq. 17–21 |
+| ``non-cooperative`` | α = 0 on peer channels (skipped), 1 on the absolute ones | each UAV alone |
 | ``random`` | α ~ U(0, 1), seeded per episode | the floor |
 | ``oracle`` | α = α_min on channels with a fault label v1, else 1 | privileged ceiling of score v1 |
 | ``oracle-v0`` | α = α_min on channels with a fault label v0, else 1 | reference of the v0 normalized score |
@@ -28,7 +29,7 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2
 
-from swarmloc.envs.channels import KIND_DIM, ChannelLayout
+from swarmloc.envs.channels import KIND_DIM, PEER, PEER_REL, ChannelLayout
 from swarmloc.envs.labels import LABEL_SIGMAS, label_thresholds
 from swarmloc.envs.rng import Stream, uniform
 
@@ -230,6 +231,26 @@ def _random_trust(keys: np.ndarray, step: int, out: np.ndarray) -> None:
                 out[b, i, l] = uniform(keys[b], step, Stream.POLICY, i * n_l + l)
 
 
+class NonCooperativeTrust(_TrustPolicy):
+    """Each UAV on its own: the peer channels skipped, the absolute ones trusted.
+
+    α = 0 on every peer range and relative position (below α_th, so the CEKF skips the
+    channel) and α = 1 on anchors, TDOA, landmarks and GPS: non-cooperative localization,
+    the baseline every cooperative method is measured against. It detects nothing; where it
+    matches the oracle, a task rewards distrusting a channel *kind*, not finding the faulty
+    links (docs/methods.md, "A shortcut baseline").
+    """
+
+    def reset(self, batch_size: int, layout: ChannelLayout, keys: np.ndarray) -> None:
+        """Start B episodes; mark the peer channels of the layout."""
+        super().reset(batch_size, layout, keys)
+        self._absolute = ~np.isin(layout.kind, (PEER, PEER_REL))  # (N, L)
+
+    def act(self, inp: TrustInput) -> np.ndarray:
+        """Returns ``(B, N, L)``: 1 on absolute channels, 0 on peer channels."""
+        return np.broadcast_to(self._absolute, inp.nis.shape).astype(np.float64)
+
+
 class RandomTrust(_TrustPolicy):
     """α ~ U(0, 1) independently per channel and step: the floor every method should beat.
 
@@ -366,6 +387,11 @@ def chi2_soft_policy() -> Chi2SoftTrust:
 def federated_coef_policy() -> FederatedCoefTrust:
     """Registry factory: ``federated-coef`` (d = 0.85)."""
     return FederatedCoefTrust(0.85)
+
+
+def non_cooperative_policy() -> NonCooperativeTrust:
+    """Registry factory: ``non-cooperative`` (peer channels skipped)."""
+    return NonCooperativeTrust()
 
 
 def random_policy() -> RandomTrust:

@@ -79,6 +79,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "CUSUM per channel on the NIS (λ = 4, ARL₀ = 10⁴), readmits on a reverse CUSUM"),
     MethodEntry("raim", "swarmloc.agents.integrity:raim_policy", "A", False, True,
                 "RAIM per UAV: Σ NIS vs χ²₀.₉₉₉, leave-one-out exclusion up to a minority"),
+    MethodEntry("non-cooperative", f"{_A}:non_cooperative_policy", "A", False, True,
+                "each UAV alone: peer channels skipped, absolute ones trusted (a shortcut probe)"),
     MethodEntry("random", f"{_A}:random_policy", "A", False, True, "α ~ U(0, 1), seeded (the floor)"),
     MethodEntry("dead-reckoning", "swarmloc.agents.dead_reckoning:dead_reckoning", "B", False, True,
                 "IMU only from the initial prior"),

@@ -66,8 +66,8 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 """
 
 _SHIPPED_TRACK_A: tuple[str, ...] = (
-    "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "random", "oracle",
-    "oracle-v0",
+    "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "non-cooperative",
+    "random", "oracle", "oracle-v0",
     "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only", "mappo-set-gru",
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (

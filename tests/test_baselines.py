@@ -12,6 +12,7 @@ from swarmloc.agents.classical import (
     Chi2SoftTrust,
     FederatedCoefTrust,
     HuberTrust,
+    NonCooperativeTrust,
     OracleTrust,
     RandomTrust,
 )
@@ -19,7 +20,7 @@ from swarmloc.agents.protocols import PrivilegedInfo, episode_keys
 from swarmloc.agents.registry import load_method
 from swarmloc.agents.smoothing import MarkovSmoothing, smooth_step
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
-from swarmloc.envs.channels import ANCHOR, GPS, ChannelLayout
+from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, ChannelLayout
 from swarmloc.envs.tasks import get_spec
 
 SEEDS = list(range(1_000_000, 1_000_008))
@@ -65,6 +66,26 @@ def test_federated_coefficient():
     # a lone present channel keeps full trust whatever its residual
     alpha = pol.act(_input(np.array([[[50.0, 0.0, 0.0, 0.0]]]), np.array([[[True, False, False, False]]])))
     assert alpha[0, 0, 0] == 1.0
+
+
+def test_non_cooperative_skips_exactly_the_peer_channels():
+    pol = NonCooperativeTrust()
+    pol.reset(2, _layout([ANCHOR, PEER, LANDMARK, GPS, PEER_REL, TDOA]), episode_keys([0, 1]))
+    alpha = pol.act(_input(np.full((2, 1, 6), 50.0)))
+    np.testing.assert_array_equal(alpha, [[[1.0, 0.0, 1.0, 1.0, 0.0, 1.0]]] * 2)
+
+
+def test_non_cooperative_estimates_ignore_the_peer_measurements():
+    """Invariant: with the peer channels skipped, noisier peer ranges change no estimate (bit for bit)."""
+    base = get_spec("swarmloc/Ideal-v1", duration=3.0)
+    rmse = {}
+    for sigma in (0.15, 5.0):
+        peers = {**base.sensors.peers.model_dump(), "sigma": sigma}
+        spec = get_spec("swarmloc/Ideal-v1", duration=3.0, sensors={**base.sensors.model_dump(), "peers": peers})
+        for name in ("non-cooperative", "uniform"):
+            rmse[name, sigma] = [m["rmse"] for m in rollout(load_method(name), spec, SEEDS[:2])[0]]
+    assert rmse["non-cooperative", 0.15] == rmse["non-cooperative", 5.0]
+    assert rmse["uniform", 0.15] != rmse["uniform", 5.0]  # the peers do reach the standard CEKF
 
 
 def test_random_trust_is_keyed_per_episode():

@@ -316,8 +316,9 @@ def test_the_committed_report_is_current_and_a_reduced_rerun_agrees(tmp_path):
     assert [t["task"] for t in committed["tasks"]] == suite.tasks
     assert all(t["n_seeds"] == 32 for t in committed["tasks"])
     # criteria whose 32-seed value is far from its threshold (a verdict near one may flip on 3 seeds:
-    # Scale2-v1's uniform/bound is 1.90 against 2)
-    checks = {"swarmloc/Ideal-v1": ("ceiling", "not_degenerate", "phenomenon"),
+    # Scale2-v1's uniform/bound is 1.90 against 2; on Ideal-v1 non-cooperative is 0.150 m against the
+    # oracle's 0.153, so its ceiling verdict is near one too)
+    checks = {"swarmloc/Ideal-v1": ("not_degenerate", "phenomenon"),
               "swarmloc/NLOS-v1": ("ceiling", "fault_matters", "not_degenerate"),
               "swarmloc/CascadedFault-v1": ("ceiling", "fault_matters", "not_degenerate", "phenomenon")}
     raw = K.reproduce_calibration("standard-v1", ",".join(checks), 3, tmp_path / "c.md", tmp_path / "c.json")
