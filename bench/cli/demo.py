@@ -6,15 +6,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-#: the demo's default comparison: every classical link-trust baseline (one-step gates,
+#: the demo's default comparison: the classical link-trust baselines (one-step gates,
 #: sequential detection, integrity monitoring), the oracle, the paper's learned MAPPO trust
 #: and one estimator per family that runs on every task (``mappo-set-gru``, about 2× mappo's
-#: cost, is on the leaderboard and one flag away),
+#: cost, and the ``non-cooperative`` probe are on the leaderboard and one flag away),
 #: so that the main job stays short on a 2-core machine (the target is five minutes; measured
-#: 4 min 52 s by `make demo` with a populated leaderboard store, warm numba cache: quick-v1 96 s
-#: + 46 s of plots, real-v1 103 s + 27 s, the leaderboard ≈ 15 s; `pf` is a third of quick-v1's
-#: CPU time). The task-specific estimators (IMM, federated, CI-EKF, the other PFs) are on the
-#: leaderboard and one flag away.
+#: 4 min 30 s by `make demo` with a populated leaderboard store, warm numba cache: quick-v1 99 s
+#: + 41 s of plots, real-v1 95 s + 20 s, the leaderboard ≈ 15 s; with ``non-cooperative`` too,
+#: 4 min 58 s; `pf` is a third of quick-v1's CPU time). The task-specific estimators (IMM,
+#: federated, CI-EKF, the other PFs) are on the leaderboard and one flag away.
 DEMO_METHODS = ("uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "random",
                 "mappo", "dead-reckoning", "pf", "oracle")
 
