@@ -205,6 +205,7 @@ def task_result(ev: Evidence) -> dict[str, Any]:
         "rmse": {m: C.mean_ci(v) for m, v in rmse.items()},
         "bound": None if bound is None else C.mean_ci(bound),
         "best_classical": best_classical, "criteria": criteria, "passes": _passes(criteria),
+        "kind_rule": C.kind_rule(rmse),
         "gap_closed": {m: C.gap_closed(ev.task, rows) for m, rows in ev.episodes.items()},
     }
 

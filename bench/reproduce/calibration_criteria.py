@@ -192,6 +192,33 @@ def not_degenerate(rmse: Mapping[str, np.ndarray]) -> Verdict:
             "best": best}
 
 
-__all__ = ["FAULT_MATTERS_RATIO", "GAP_CLOSED_MAX", "GATING", "HEADROOM_TASK_FRACTION", "RANDOM_MIN_RATIO",
-           "best_of", "ceiling_valid", "fault_matters", "gap_closed", "headroom", "headroom_overall", "mean_ci",
-           "means", "not_degenerate"]
+# --------------------------------------------------------------------------- beside the criteria
+
+#: the shortcut probe: a constant rule by channel kind that detects nothing (every peer channel skipped)
+KIND_RULE = "non-cooperative"
+
+
+def kind_rule(rmse: Mapping[str, np.ndarray], oracle: str = "oracle", probe: str = KIND_RULE) -> Verdict | None:
+    """How the kind rule ``probe`` stands against the oracle: per seed d = log2(RMSE_oracle / RMSE_probe).
+
+    Not a criterion: where the rule is level with the oracle (the 95 % CI of the mean of d
+    contains 0) the task's gain is there for a method that drops a channel kind without
+    finding a faulty link; where it is above (CI above 0) the oracle is not the ceiling of
+    the trust policies, which criterion 1 also reports.
+
+    Returns:
+        ``{"position": "above" | "level" | "below", "log2": mean d, "ci": [lo, hi], "measured"}``,
+        or None when either method did not run.
+    """
+    if probe not in rmse or oracle not in rmse:
+        return None
+    d = np.log2(np.asarray(rmse[oracle], dtype=float) / np.asarray(rmse[probe], dtype=float))
+    lo, hi = bootstrap_ci(d)
+    position = "above" if lo > 0 else "below" if hi < 0 else "level"
+    return {"position": position, "log2": float(d.mean()), "ci": [lo, hi],
+            "measured": f"{probe} vs {oracle} {d.mean():+.3f} log2 [{lo:+.3f}, {hi:+.3f}]"}
+
+
+__all__ = ["FAULT_MATTERS_RATIO", "GAP_CLOSED_MAX", "GATING", "HEADROOM_TASK_FRACTION", "KIND_RULE",
+           "RANDOM_MIN_RATIO", "best_of", "ceiling_valid", "fault_matters", "gap_closed", "headroom", "headroom_overall",
+           "kind_rule", "mean_ci", "means", "not_degenerate"]

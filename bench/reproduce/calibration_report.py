@@ -93,6 +93,22 @@ def _summary(raw: Mapping[str, Any]) -> list[str]:
         judged = [t["criteria"][key] for t in tasks if t["criteria"][key] is not None
                   and t["criteria"][key]["pass"] is not None]
         lines.append(f"- {title}: {sum(bool(v['pass']) for v in judged)}/{len(judged)} judged tasks pass")
+    return lines + [""] + _kind_rule(tasks)
+
+
+def _kind_rule(tasks: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Where the shortcut probe (``C.KIND_RULE``) is level with the oracle or above it."""
+    judged = [t for t in tasks if t.get("kind_rule")]
+    if not judged:
+        return []
+    lines = [f"A shortcut probe, not a criterion: `{C.KIND_RULE}` skips every peer channel and detects nothing. "
+             "Paired per seed, log2(oracle RMSE / its RMSE) with the 95 % CI of the mean:", ""]
+    for position, what in (("above", "above the oracle (the oracle is not the ceiling there)"),
+                           ("level", "level with the oracle (not told apart: a rule by channel kind may take the task's gain)")):
+        hits = [t for t in judged if t["kind_rule"]["position"] == position]
+        cells = ", ".join(f"{short_task(t['task'])} {t['kind_rule']['log2']:+.3f} "
+                          f"[{t['kind_rule']['ci'][0]:+.3f}, {t['kind_rule']['ci'][1]:+.3f}]" for t in hits)
+        lines.append(f"- {what}: {len(hits)}/{len(judged)} tasks" + (f": {cells}" if hits else ""))
     return lines + [""]
 
 
