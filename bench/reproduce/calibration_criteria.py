@@ -220,5 +220,5 @@ def kind_rule(rmse: Mapping[str, np.ndarray], oracle: str = "oracle", probe: str
 
 
 __all__ = ["FAULT_MATTERS_RATIO", "GAP_CLOSED_MAX", "GATING", "HEADROOM_TASK_FRACTION", "KIND_RULE",
-           "RANDOM_MIN_RATIO", "best_of", "ceiling_valid", "fault_matters", "gap_closed", "headroom", "headroom_overall",
-           "kind_rule", "mean_ci", "means", "not_degenerate"]
+           "RANDOM_MIN_RATIO", "best_of", "ceiling_valid", "fault_matters", "gap_closed", "headroom",
+           "headroom_overall", "kind_rule", "mean_ci", "means", "not_degenerate"]

@@ -103,8 +103,9 @@ def _kind_rule(tasks: Sequence[Mapping[str, Any]]) -> list[str]:
         return []
     lines = [f"A shortcut probe, not a criterion: `{C.KIND_RULE}` skips every peer channel and detects nothing. "
              "Paired per seed, log2(oracle RMSE / its RMSE) with the 95 % CI of the mean:", ""]
-    for position, what in (("above", "above the oracle (the oracle is not the ceiling there)"),
-                           ("level", "level with the oracle (not told apart: a rule by channel kind may take the task's gain)")):
+    kinds = (("above", "above the oracle (the oracle is not the ceiling there)"),
+             ("level", "level with the oracle (not told apart: a rule by channel kind may take the task's gain)"))
+    for position, what in kinds:
         hits = [t for t in judged if t["kind_rule"]["position"] == position]
         cells = ", ".join(f"{short_task(t['task'])} {t['kind_rule']['log2']:+.3f} "
                           f"[{t['kind_rule']['ci'][0]:+.3f}, {t['kind_rule']['ci'][1]:+.3f}]" for t in hits)
