@@ -185,9 +185,10 @@ def board_tables(board: SuiteBoard, family: str | None = None,
     what = "family" if family is None and tasks is None else "task"
     legend = (f"2^S: × lower error than the standard CEKF (uniform), geometric mean over tasks, stratified-"
               f"bootstrap 95% CI. #: 1 + the methods ahead beyond doubt (paired 95% CI of the difference in S "
-              f"above 0); methods that share a # are not told apart by the seeds. Gap: share of the achievable gain (to the information bound) closed, mean "
-              f"over tasks where it is defined. Tasks: covered/total. {what.capitalize()} columns: × uniform "
-              f"over the {what}'s tasks (* some not covered).")
+              f"above 0); methods that share a # are not told apart by the seeds. Gap: share of the achievable "
+              f"gain (to the information bound) closed, mean over tasks where it is defined. Tasks: "
+              f"covered/total. {what.capitalize()} columns: × uniform over the {what}'s tasks (* some not "
+              f"covered).")
     if board.filled:
         ref = board.reference
         legend += (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"

@@ -50,7 +50,7 @@ from swarmloc.envs.tasks import get_spec
 
 #: the classical reference methods, run on every task
 CLASSICAL = ("uniform", "oracle", "chi2-gate", "chi2-soft", "huber", "fixed", "federated-coef", "cusum", "raim",
-             "non-cooperative", "random")
+             C.KIND_RULE, "random")
 #: run on the HybridNoise tasks as well (Track B estimators on GPS fixes)
 IMM = ("imm-kf", "imm-arkf")
 #: bases whose phenomenon reads uniform's per-seed traces
