@@ -8,7 +8,20 @@ Prediction (constant acceleration over dt, IMU reading u):
 
 Update (madrl §2.3): one joint update over the channels whose trust α > α_th, each with
 R_j = R0_j / max(α_j, α_min); Jacobians at the prior; peer channels use the neighbour's
-broadcast prior position as a known point. A TDOA channel of anchor pair (i, j) is one
+broadcast prior position as a known point (``peer_update = "point"``, every registered task).
+
+``peer_update = "ci"`` (a spec option, ``FilterSettings.peer_update``): the absolute channels
+first, as one joint update; then each peer channel in channel order, by covariance
+intersection (Julier and Uhlmann 1997) over the UAV's estimate and the neighbour's broadcast
+one, whose error correlation the UAV cannot know. The joint prior of (x_i, p_j) is bounded
+by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = h on p_i, −h on p_j)
+    S = hᵀP_i h/ω + hᵀP_j h/(1 − ω) + r,   K = (P_i/ω) hᵀ / S,   P_i⁺ = P_i/ω − K hᵀ P_i/ω,
+i.e. the point update with R = ω r + ω hᵀP_j h/(1 − ω) followed by P ← P/ω. A relative
+position (z = p_j − p_i) is one 3-row block of the same form with S = A/ω + B/(1 − ω) + r I
+(A, B the two position covariances). ω minimises tr of P_i⁺'s position block on a grid of
+``CI_GRID`` points; ω = 1 (no update) whenever the peer adds nothing, so a peer can never
+make the bound worse than the UAV's own. P_j is the neighbour's prior at this step (the
+broadcast one), read before any UAV updates. A TDOA channel of anchor pair (i, j) is one
 scalar row h = ‖p − a_j‖ − ‖p − a_i‖ with H = u_j − u_i on the position block (u_k the unit
 vector from anchor k to the prior position).
 
@@ -30,9 +43,13 @@ import numpy as np
 from numba import njit, prange
 
 from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
-from .cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
+from .cost import CI_RANGE_FLOPS, CI_REL_FLOPS, PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
 
 _MIN_RANGE = 1e-9
+#: the covariance intersection's weight ω is searched on {1/CI_GRID, …, (CI_GRID − 1)/CI_GRID} and 1
+CI_GRID = 50
+#: ``FilterSettings.peer_update`` as the kernels' integer code
+PEER_UPDATE_CODES = {"point": 0, "ci": 1}
 
 
 @njit(cache=True, inline="always")
@@ -86,7 +103,108 @@ def _scalar_update(x, P, hvec, col, y, r, c):
 
 
 @njit(cache=True, inline="always")
-def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
+def _scale_cov(P, inv_w):
+    """P ← P / ω."""
+    for a in range(6):
+        for b2 in range(6):
+            P[a, b2] *= inv_w
+
+
+@njit(cache=True, inline="always")
+def _ci_range_row(x, P, hvec, Pj, y, r, c):
+    """One peer range by covariance intersection (module docstring). Returns ω (1: no update)."""
+    a = 0.0  # hᵀ P_i h
+    b = 0.0  # hᵀ P_j h
+    cc = 0.0  # ‖(P_i h)_pos‖²
+    for u in range(3):
+        cu = 0.0
+        for v in range(3):
+            a += hvec[u] * P[u, v] * hvec[v]
+            b += hvec[u] * Pj[u, v] * hvec[v]
+            cu += P[u, v] * hvec[v]
+        cc += cu * cu
+    tr = P[0, 0] + P[1, 1] + P[2, 2]
+    # tr of P⁺'s position block: (tr − ‖(P h)_pos‖² / (ω S)) / ω; ω = 1 is no update (tr)
+    best, best_w = tr, 1.0
+    for k in range(1, CI_GRID):
+        w = k / CI_GRID
+        f = (tr - cc / (a + w * r + w * b / (1.0 - w))) / w
+        if f < best:
+            best, best_w = f, w
+    if best_w < 1.0:
+        _scalar_update(x, P, hvec, -1, y, best_w * r + best_w * b / (1.0 - best_w), c)
+        _scale_cov(P, 1.0 / best_w)
+    return best_w
+
+
+@njit(cache=True, inline="always")
+def _inv3(S, out):
+    """out = S⁻¹ of a symmetric positive definite 3×3 (adjugate over determinant)."""
+    out[0, 0] = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
+    out[0, 1] = S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]
+    out[0, 2] = S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]
+    out[1, 0] = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
+    out[1, 1] = S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]
+    out[1, 2] = S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]
+    out[2, 0] = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
+    out[2, 1] = S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]
+    out[2, 2] = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    det = S[0, 0] * out[0, 0] + S[0, 1] * out[1, 0] + S[0, 2] * out[2, 0]
+    for u in range(3):
+        for v in range(3):
+            out[u, v] /= det
+
+
+@njit(cache=True, inline="always")
+def _ci_rel_block(x, P, Pj, m, r, S, Si):
+    """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω."""
+    tr = P[0, 0] + P[1, 1] + P[2, 2]
+    best, best_w = tr, 1.0
+    for k in range(1, CI_GRID):
+        w = k / CI_GRID
+        for u in range(3):
+            for v in range(3):
+                S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
+        _inv3(S, Si)
+        # tr(A S⁻¹ A) with A = P_pp (symmetric)
+        t = 0.0
+        for u in range(3):
+            for v in range(3):
+                av = 0.0
+                for q in range(3):
+                    av += Si[u, q] * P[q, v]
+                t += P[v, u] * av
+        f = tr / w - t / (w * w)
+        if f < best:
+            best, best_w = f, w
+    if best_w >= 1.0:
+        return 1.0
+    w = best_w
+    for u in range(3):
+        for v in range(3):
+            S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
+    _inv3(S, Si)
+    _scale_cov(P, 1.0 / w)
+    # K = P[:, :3] S⁻¹ (on the scaled P), y = m − p
+    K = np.empty((6, 3))
+    for a in range(6):
+        for v in range(3):
+            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
+    y0, y1, y2 = m[0] - x[0], m[1] - x[1], m[2] - x[2]
+    for a in range(6):
+        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
+    # P ← P − K P[:3, :] (upper triangle, mirrored; P[:3, :] read from a copy)
+    top = P[:3, :].copy()
+    for a in range(6):
+        for b2 in range(a, 6):
+            v = P[a, b2] - (K[a, 0] * top[0, b2] + K[a, 1] * top[1, b2] + K[a, 2] * top[2, b2])
+            P[a, b2] = v
+            P[b2, a] = v
+    return w
+
+
+@njit(cache=True, inline="always")
+def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos, prior_pp, peer_update,
                alpha_th, alpha_min, active, x0, hvec, c):
     """Trust-weighted joint update of one UAV over its L channels (in place).
 
@@ -95,6 +213,8 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
         z: ``(L, 3)`` measurements; valid, alpha: ``(L,)``.
         kind, target, r0: ``(L,)`` static channel description.
         anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        prior_pp: ``(N, 3, 3)`` the broadcast priors' position covariances (read by ``"ci"``).
+        peer_update: ``PEER_UPDATE_CODES`` of ``FilterSettings.peer_update``.
         active: ``(L,)`` output, whether the channel was used.
         x0, hvec, c: scratch 6-, 3-, 6-vectors.
 
@@ -105,15 +225,29 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
     for a in range(6):
         x0[a] = x[a]
     for l in range(kind.shape[0]):
+        active[l] = False
+    # "ci": the absolute channels in pass 0, then the peer channels in pass 1
+    for l2 in range(kind.shape[0] * (2 if peer_update == 1 else 1)):
+        l = l2 % kind.shape[0]
         al = alpha[l]
         use = valid[l] and al > alpha_th
-        active[l] = False
         if not use:
             continue
         # R = R0 / max(α, α_min)
         r = r0[l] / max(al, alpha_min)
         ch = kind[l]
         j = target[l]
+        if peer_update == 1:
+            is_peer = ch == PEER or ch == PEER_REL
+            if is_peer != (l2 >= kind.shape[0]):
+                continue
+            if ch == PEER_REL:
+                for d in range(3):
+                    hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
+                _ci_rel_block(x, P, prior_pp[j], hvec, r, np.empty((3, 3)), np.empty((3, 3)))
+                flops += CI_REL_FLOPS
+                active[l] = True
+                continue
         if ch == ANCHOR or ch == PEER:
             if ch == ANCHOR:
                 q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
@@ -128,7 +262,11 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             # y = z − h(x⁻) − H (x − x⁻)
             y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
             # H enters as +hvec; _scalar_update uses hvec when col < 0
-            _scalar_update(x, P, hvec, -1, y, r, c)
+            if ch == PEER and peer_update == 1:
+                _ci_range_row(x, P, hvec, prior_pp[j], y, r, c)
+                flops += CI_RANGE_FLOPS
+            else:
+                _scalar_update(x, P, hvec, -1, y, r, c)
             flops += RANGE_ROW_FLOPS
         elif ch == TDOA:
             # the pair (i, j) of target code j = i·A + j': h = ‖p − a_j'‖ − ‖p − a_i‖
@@ -177,26 +315,31 @@ def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
-                alpha_th, alpha_min, active, flops):
+                alpha_th, alpha_min, active, flops, peer_update=0):
     """Trust-weighted joint update of every UAV of every episode (in place).
 
     Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
-    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output.
+    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output;
+    P holds the priors on entry (``"ci"`` reads the neighbours' before any UAV updates).
     """
     n_b, n = x.shape[0], x.shape[1]
     for b in prange(n_b):
         x0 = np.empty(6)
         hvec = np.empty(3)
         c = np.empty(6)
+        prior_pp = np.empty((n, 3, 3))
+        for i in range(n):
+            prior_pp[i] = P[b, i, :3, :3]
         for i in range(n):
             flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
-                                    r0[i], anchors, landmarks, prior_pos[b], alpha_th, alpha_min,
+                                    r0[i], anchors, landmarks, prior_pos[b], prior_pp, peer_update, alpha_th,
+                                    alpha_min,
                                     active[b, i], x0, hvec, c)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
-             alpha_th, alpha_min, est):
+             alpha_th, alpha_min, est, peer_update=0):
     """Filter whole sequences: T predict+update steps per episode in one call.
 
     Shapes: imu ``(T, B, N, 3)``, z ``(T, B, N, L, 3)``, valid/alpha ``(T, B, N, L)``,
@@ -210,15 +353,17 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
         hvec = np.empty(3)
         c = np.empty(6)
         prior = np.empty((n, 3))
+        prior_pp = np.empty((n, 3, 3))
         active = np.empty(n_l, dtype=np.bool_)
         for t in range(n_t):
             for i in range(n):
                 predict_uav(x[b, i], P[b, i], imu[t, b, i], dt, q)
                 for d in range(3):
                     prior[i, d] = x[b, i, d]
+                prior_pp[i] = P[b, i, :3, :3]
             for i in range(n):
                 update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
-                           r0[i], anchors, landmarks, prior, alpha_th, alpha_min, active, x0, hvec, c)
+                           r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0, hvec, c)
                 for d in range(3):
                     est[t, b, i, d] = x[b, i, d]
 

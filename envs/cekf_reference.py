@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import ANCHOR, GPS, LANDMARK, PEER, TDOA, tdoa_pair
+from .channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
 
 def transition(dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -69,10 +69,76 @@ def measurement_rows(x: np.ndarray, z: np.ndarray, kind: int, target: int, ancho
     return z - (q - p), H
 
 
+def ci_peer_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, B: np.ndarray, r: float,
+                   grid: int = 50) -> tuple[np.ndarray, np.ndarray, float]:
+    """Covariance intersection of one peer channel (Julier and Uhlmann 1997; ``cekf`` docstring).
+
+    The joint prior of (x_i, p_j) is bounded by blockdiag(P/ω, B/(1 − ω)) for the unknown
+    correlation, so the channel updates x_i with S = H (P/ω) Hᵀ + J B Jᵀ/(1 − ω) + r I,
+    J = ∂h/∂p_j = ±H_pos. ω minimises tr of the posterior's position block over
+    {1/grid, …, (grid − 1)/grid} and ω = 1, which is no update.
+
+    Args:
+        x, P: the UAV's current mean and covariance.
+        y: ``(m,)`` innovation at the current mean; H: ``(m, 6)`` its Jacobian in x_i.
+        B: ``(3, 3)`` the neighbour's broadcast position covariance; r: the rows' variance.
+
+    Returns:
+        (x⁺, P⁺, ω).
+    """
+    Hp = H[:, :3]
+    R = np.eye(len(y)) * r
+
+    def posterior(w: float) -> tuple[np.ndarray, np.ndarray]:
+        A = P / w
+        R_eff = Hp @ B @ Hp.T / (1.0 - w) + R
+        S = H @ A @ H.T + R_eff
+        K = np.linalg.solve(S, H @ A).T
+        I_KH = np.eye(6) - K @ H
+        return x + K @ y, I_KH @ A @ I_KH.T + K @ R_eff @ K.T
+
+    best_w, best = 1.0, np.trace(P[:3, :3])
+    for k in range(1, grid):
+        w = k / grid
+        value = np.trace(posterior(w)[1][:3, :3])
+        if value < best:
+            best_w, best = w, value
+    if best_w == 1.0:
+        return x.copy(), P.copy(), 1.0
+    x_post, P_post = posterior(best_w)
+    return x_post, P_post, best_w
+
+
 def update_reference(x: np.ndarray, P: np.ndarray, z: np.ndarray, valid: np.ndarray, alpha: np.ndarray,
                      kind: np.ndarray, target: np.ndarray, r0: np.ndarray, anchors: np.ndarray,
-                     landmarks: np.ndarray, prior_pos: np.ndarray, alpha_th: float, alpha_min: float):
-    """One UAV's trust-weighted joint update. Returns (x⁺, P⁺, active (L,) bool)."""
+                     landmarks: np.ndarray, prior_pos: np.ndarray, alpha_th: float, alpha_min: float,
+                     prior_cov: np.ndarray | None = None, peer_update: str = "point"):
+    """One UAV's trust-weighted joint update. Returns (x⁺, P⁺, active (L,) bool).
+
+    ``peer_update = "ci"`` (``prior_cov`` ``(N, 6, 6)`` the broadcast covariances): the joint
+    update of the absolute channels, then each peer channel by :func:`ci_peer_update`, in
+    channel order, linearised at the prior like the others.
+    """
+    peers = np.isin(kind, (PEER, PEER_REL)) if peer_update == "ci" else np.zeros(len(kind), dtype=bool)
+    x_post, P_post, active = _joint_update(x, P, z, valid & ~peers, alpha, kind, target, r0, anchors, landmarks,
+                                           prior_pos, alpha_th, alpha_min)
+    for l in np.flatnonzero(peers & valid & (alpha > alpha_th)):
+        rows = measurement_rows(x, z[l], int(kind[l]), int(target[l]), anchors, landmarks, prior_pos)
+        if rows is None:
+            continue
+        y, H = rows
+        # linearised at the prior x: y − H (x_post − x) is the innovation at the current mean
+        y = y - H @ (x_post - x)
+        B = prior_cov[int(target[l]), :3, :3]
+        x_post, P_post, _ = ci_peer_update(x_post, P_post, y, H, B, r0[l] / max(alpha[l], alpha_min))
+        active[l] = True
+    return x_post, P_post, active
+
+
+def _joint_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, valid: np.ndarray, alpha: np.ndarray,
+                  kind: np.ndarray, target: np.ndarray, r0: np.ndarray, anchors: np.ndarray,
+                  landmarks: np.ndarray, prior_pos: np.ndarray, alpha_th: float, alpha_min: float):
+    """The joint update of the channels in ``valid`` with α > α_th. Returns (x⁺, P⁺, active)."""
     ys, Hs, Rs = [], [], []
     active = np.zeros(len(kind), dtype=bool)
     for l in range(len(kind)):
@@ -108,7 +174,8 @@ def update_reference(x: np.ndarray, P: np.ndarray, z: np.ndarray, valid: np.ndar
 
 def run_reference(x: np.ndarray, P: np.ndarray, imu: np.ndarray, z: np.ndarray, valid: np.ndarray,
                   alpha: np.ndarray, kind: np.ndarray, target: np.ndarray, r0: np.ndarray, anchors: np.ndarray,
-                  landmarks: np.ndarray, dt: float, imu_sigma: float, alpha_th: float, alpha_min: float):
+                  landmarks: np.ndarray, dt: float, imu_sigma: float, alpha_th: float, alpha_min: float,
+                  peer_update: str = "point"):
     """Filter whole sequences (same contract as ``cekf.cekf_run``). Returns (est (T,B,N,3), x, P)."""
     x, P = x.copy(), P.copy()
     n_t, n_b, n = z.shape[:3]
@@ -117,10 +184,10 @@ def run_reference(x: np.ndarray, P: np.ndarray, imu: np.ndarray, z: np.ndarray, 
         for b in range(n_b):
             for i in range(n):
                 x[b, i], P[b, i] = predict_reference(x[b, i], P[b, i], imu[t, b, i], dt, imu_sigma)
-            prior_pos = x[b, :, :3].copy()
+            prior_pos, prior_cov = x[b, :, :3].copy(), P[b].copy()
             for i in range(n):
                 x[b, i], P[b, i], _ = update_reference(
                     x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i], r0[i],
-                    anchors, landmarks, prior_pos, alpha_th, alpha_min)
+                    anchors, landmarks, prior_pos, alpha_th, alpha_min, prior_cov, peer_update)
             est[t, b] = x[b, :, :3]
     return est, x, P

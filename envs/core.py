@@ -121,6 +121,7 @@ class LinkTrustCore:
         self._filter = FilterArrays(
             dt=float(s.dt), imu_sigma=float(s.sensors.imu_sigma), alpha_th=float(s.filter.alpha_th),
             alpha_min=float(s.filter.alpha_min), n_steps=int(s.n_steps), peer_cov=bool(s.peer_nis_neighbour_cov),
+            peer_update=cekf.PEER_UPDATE_CODES[s.filter.peer_update],
             kind=self.layout.kind,
             target=self.layout.target, r0=self._r0, sigma=np.ascontiguousarray(self.layout.sigma),
             label_threshold=self.label_threshold, anchors=w.anchors, landmarks=w.landmarks, world_pos=buf.pos,

@@ -50,6 +50,8 @@ class FilterArrays(NamedTuple):
         n_steps: updates per episode.
         peer_cov: a peer channel's NIS includes the neighbour's broadcast covariance
             (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks; v0 keeps S = H P_i Hᵀ + R0).
+        peer_update: ``cekf.PEER_UPDATE_CODES`` of ``FilterSettings.peer_update`` (0: the
+            neighbour as a known point; 1: covariance intersection).
         kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²];
             sigma ``(N, L)`` the nominal σ [m] (labels v1 divide by it, as the world does).
         label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff.
@@ -86,6 +88,7 @@ class FilterArrays(NamedTuple):
     alpha_min: float
     n_steps: int
     peer_cov: bool
+    peer_update: int
     kind: np.ndarray
     target: np.ndarray
     r0: np.ndarray
@@ -144,6 +147,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
     """
     n, n_l = f.kind.shape[0], f.kind.shape[1]
     x0, hvec, c, yv, S = np.empty(6), np.empty(3), np.empty(6), np.empty(3), np.empty((3, 3))
+    prior_pp = np.empty((n, 3, 3))
     # ---- score: posterior at the pending step; a finished episode is updated too (its
     # state is never scored again) but its outputs stay
     for b in range(lo, hi):
@@ -151,9 +155,14 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
         if not score:
             continue
         live = not f.done[b]
+        for i in range(n):  # the broadcast covariances, before any UAV updates ("ci" reads them)
+            for d in range(3):
+                for e in range(3):
+                    prior_pp[i, d, e] = f.P[b, i, d, e]
         for i in range(n):
             flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
-                               f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], f.alpha_th,
+                               f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], prior_pp,
+                               f.peer_update, f.alpha_th,
                                f.alpha_min, f.active[b, i], x0, hvec, c)
             if live:
                 f.flops[b, i] = flops

@@ -22,6 +22,12 @@ VECTOR_ROW_FLOPS = 81
 #: one TDOA row: a range row whose model is two ranges, ‖p − a_j‖ − ‖p − a_i‖, and whose
 #: H is the difference of the two unit vectors: 2 × 12 + 4 in place of the range's 12
 TDOA_ROW_FLOPS = RANGE_ROW_FLOPS - 12 + 28
+#: covariance intersection (``FilterSettings.peer_update = "ci"``), on top of the rows above:
+#: a peer range adds hᵀP_j h and tr (24), the ω search (49 × 8) and P/ω on 36 entries
+CI_RANGE_FLOPS = 24 + 49 * 8 + 36
+#: a relative-position link updates as one 3-row block: the ω search (49 × (3×3 S and its
+#: inverse 45, tr(A S⁻¹ A) 54)), then the gain (90), x (18), P (126) and P/ω (36)
+CI_REL_FLOPS = 49 * 99 + 90 + 18 + 126 + 36
 
 
 def filter_flops(n_range_rows: np.ndarray, n_vector_rows: np.ndarray, n_tdoa_rows: np.ndarray | int = 0) -> np.ndarray:
