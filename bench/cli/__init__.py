@@ -60,6 +60,7 @@ COMMANDS: CommandTable = {
         "real": "swarmloc.bench.cli.reproduce_real",
         "labels": "swarmloc.bench.cli.reproduce_labels",
         "calibration": "swarmloc.bench.cli.reproduce_calibration",
+        "peer-update": "swarmloc.bench.cli.reproduce_peer_update",
     },
     "bench": {
         "speed": "swarmloc.bench.cli.bench_speed",

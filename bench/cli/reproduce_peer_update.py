@@ -1,0 +1,33 @@
+"""``swarmloc reproduce peer-update``: the registered CEKF's peer update against covariance intersection."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass
+class Options:
+    """The CEKF's peer update as registered (a known point, madrl §2.3) against covariance intersection, on
+    the standard-v1 tasks with peer channels: oracle ceiling, fault size and gate lock-outs under each."""
+
+    out: Path = Path("peer-update.md")
+    """Markdown file to write (a folder: <out>/peer-update.md); raw numbers go beside it as .json."""
+    seeds: int = 32
+    """Test seeds per task (1_000_000 …), at least 2."""
+    tasks: list[str] = field(default_factory=list)
+    """Task IDs (default: every standard-v1 task with peer channels)."""
+
+
+def run(opts: Options) -> int:
+    """Write the report and print it."""
+    from swarmloc.bench.reproduce.peer_update import reproduce_peer_update
+    from swarmloc.envs.tasks import UnknownTaskError
+
+    try:
+        path = reproduce_peer_update(opts.out, opts.seeds, opts.tasks or None)
+    except (ValueError, UnknownTaskError) as err:
+        print(f"error: {err}")
+        return 2
+    print(path.read_text())
+    return 0
