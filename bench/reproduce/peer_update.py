@@ -39,6 +39,8 @@ METHODS: tuple[str, ...] = ("uniform", "oracle", "non-cooperative", "chi2-gate",
 UPDATES: tuple[str, ...] = ("point", "ci")
 #: criterion 2 of the calibration: the fault matters when uniform ≥ this × the bound
 FAULT_MATTERS = 2.0
+#: a gate locks out when its RMSE is at least this × uniform's
+LOCK_OUT = 2.0
 
 
 def peer_tasks(tasks: Sequence[str] = STANDARD_V1_TASKS) -> list[str]:
@@ -58,13 +60,15 @@ def _ceiling_beaten_by(rmse: dict[str, np.ndarray]) -> list[str]:
     return out
 
 
-def measure_task(task: str, seeds: list[int]) -> dict:
-    """RMSE per seed of every method under both updates, and the bound, on one task."""
-    base = get_spec(task)
+def measure_task(task: str, seeds: list[int], duration: float | None = None) -> dict:
+    """RMSE per seed of every method under both updates, and the bound, on one task (its episodes
+    cut to ``duration`` seconds if given)."""
+    over = {"duration": duration} if duration else {}
+    base = get_spec(task, **over)
     bound = np.array([b.rmse for b in episode_bounds(base, seeds)], dtype=float)
     row: dict = {"task": task, "bound": bound.tolist(), "rmse": {}}
     for update in UPDATES:
-        spec: TaskSpec = base if update == "point" else get_spec(task, filter={"peer_update": update})
+        spec: TaskSpec = base if update == "point" else get_spec(task, filter={"peer_update": update}, **over)
         rmse = {}
         for m in METHODS:
             metrics, _ = rollout(load_method(m, version=spec.version), spec, seeds)
@@ -78,7 +82,7 @@ def measure_task(task: str, seeds: list[int]) -> dict:
 
 def _cell(values: list[float]) -> str:
     v = float(np.mean(values))
-    return f"{v:.3f}" if v < 100 else f"{v:.0f}"
+    return f"{v:.3f}" if v < 10 else f"{v:.1f}" if v < 100 else f"{v:.0f}"
 
 
 def render(rows: list[dict], n_seeds: int) -> str:
@@ -95,8 +99,8 @@ def render(rows: list[dict], n_seeds: int) -> str:
         lines.append(f"| {r['task'].removeprefix('swarmloc/')} | {np.mean(r['bound']):.3f} | " + " | ".join(cells) + " |")
     lines += ["", "## What each filter makes of the task", "",
               "Oracle beaten: the non-privileged policies better than the oracle by a paired 95 % CI "
-              "(criterion 1 fails). uniform/bound ≥ 2: the fault matters (criterion 2). chi2-gate/uniform > 1: "
-              "the one-step gate does worse than trusting everything.", "",
+              "(criterion 1 fails). uniform/bound ≥ 2: the fault matters (criterion 2). chi2-gate/uniform ≥ 2: "
+              "the one-step gate locks channels out (docs/methods.md).", "",
               "| task | oracle beaten (point) | oracle beaten (ci) | uniform/bound point | ci | "
               "chi2-gate/uniform point | ci |", "|---|---|---|---:|---:|---:|---:|"]
     for r in rows:
@@ -106,20 +110,38 @@ def render(rows: list[dict], n_seeds: int) -> str:
                      f"| {c['uniform_over_bound']:.2f} | {p['gate_over_uniform']:.2f} | {c['gate_over_uniform']:.2f} |")
     count = {u: {"beaten": sum(bool(r[u]["ceiling_beaten_by"]) for r in rows),
                  "matters": sum(r[u]["uniform_over_bound"] >= FAULT_MATTERS for r in rows),
-                 "gate_worse": sum(r[u]["gate_over_uniform"] > 1.0 for r in rows)} for u in UPDATES}
-    lines += ["", "| filter | oracle beaten | uniform ≥ 2× bound | chi2-gate worse than uniform |",
+                 "lock_out": sum(r[u]["gate_over_uniform"] >= LOCK_OUT for r in rows)} for u in UPDATES}
+    lines += ["", "| filter | oracle beaten | uniform ≥ 2× bound | chi2-gate ≥ 2× uniform |",
               "|---|---:|---:|---:|"]
     for u in UPDATES:
         lines.append(f"| `{u}` | {count[u]['beaten']}/{len(rows)} | {count[u]['matters']}/{len(rows)} "
-                     f"| {count[u]['gate_worse']}/{len(rows)} |")
+                     f"| {count[u]['lock_out']}/{len(rows)} |")
+    lines += _scale_lines(rows)
     return "\n".join(lines) + "\n"
 
 
-def reproduce_peer_update(out: Path, seeds: int = 32, tasks: Sequence[str] | None = None) -> Path:
+def _scale_lines(rows: list[dict]) -> list[str]:
+    """Uniform's growth with the swarm size (the Scale phenomenon of DESIGN.md) under each filter."""
+    by_n = {int(r["task"].removeprefix("swarmloc/Scale").removesuffix("-v1")): r for r in rows
+            if r["task"].removeprefix("swarmloc/Scale").removesuffix("-v1").isdigit()}
+    if len(by_n) < 2:
+        return []
+    ns = sorted(by_n)
+    out = ["", f"Scale{ns[0]}…{ns[-1]}-v1, uniform's RMSE by swarm size N (the Scale phenomenon: it grows with N):", "",
+           "| filter | " + " | ".join(f"N = {n}" for n in ns) + f" | N = {ns[-1]} / N = {ns[0]} |",
+           "|---|" + "---:|" * (len(ns) + 1)]
+    for u in UPDATES:
+        v = [float(np.mean(by_n[n]["rmse"][u]["uniform"])) for n in ns]
+        out.append(f"| `{u}` | " + " | ".join(f"{x:.3f}" for x in v) + f" | {v[-1] / v[0]:.2f} |")
+    return out
+
+
+def reproduce_peer_update(out: Path, seeds: int = 32, tasks: Sequence[str] | None = None,
+                          duration: float | None = None) -> Path:
     """Measure and write ``<out>`` (markdown, + .json beside it); returns its path."""
     chosen = peer_tasks() if tasks is None else [get_spec(t).task_id for t in tasks]
     S = seeds_from(seeds)
-    rows = [measure_task(t, S) for t in chosen]
+    rows = [measure_task(t, S, duration) for t in chosen]
     return write_paper_report(out, "peer-update", render(rows, len(S)), {"seeds": S, "tasks": rows})
 
 
