@@ -225,29 +225,17 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
     for a in range(6):
         x0[a] = x[a]
     for l in range(kind.shape[0]):
-        active[l] = False
-    # "ci": the absolute channels in pass 0, then the peer channels in pass 1
-    for l2 in range(kind.shape[0] * (2 if peer_update == 1 else 1)):
-        l = l2 % kind.shape[0]
         al = alpha[l]
         use = valid[l] and al > alpha_th
+        active[l] = False
         if not use:
             continue
         # R = R0 / max(α, α_min)
         r = r0[l] / max(al, alpha_min)
         ch = kind[l]
         j = target[l]
-        if peer_update == 1:
-            is_peer = ch == PEER or ch == PEER_REL
-            if is_peer != (l2 >= kind.shape[0]):
-                continue
-            if ch == PEER_REL:
-                for d in range(3):
-                    hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
-                _ci_rel_block(x, P, prior_pp[j], hvec, r, np.empty((3, 3)), np.empty((3, 3)))
-                flops += CI_REL_FLOPS
-                active[l] = True
-                continue
+        if peer_update == 1 and (ch == PEER or ch == PEER_REL):
+            continue  # "ci": the peer channels after the absolute ones (_ci_peers)
         if ch == ANCHOR or ch == PEER:
             if ch == ANCHOR:
                 q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
@@ -262,11 +250,7 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             # y = z − h(x⁻) − H (x − x⁻)
             y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
             # H enters as +hvec; _scalar_update uses hvec when col < 0
-            if ch == PEER and peer_update == 1:
-                _ci_range_row(x, P, hvec, prior_pp[j], y, r, c)
-                flops += CI_RANGE_FLOPS
-            else:
-                _scalar_update(x, P, hvec, -1, y, r, c)
+            _scalar_update(x, P, hvec, -1, y, r, c)
             flops += RANGE_ROW_FLOPS
         elif ch == TDOA:
             # the pair (i, j) of target code j = i·A + j': h = ‖p − a_j'‖ − ‖p − a_i‖
@@ -298,6 +282,40 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
                     _scalar_update(x, P, hvec, d, y, r, c)
                 flops += VECTOR_ROW_FLOPS
         active[l] = True
+    if peer_update == 1:
+        flops += _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active,
+                           x0, hvec, c)
+    return flops
+
+
+@njit(cache=True)
+def _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active, x0, hvec, c):
+    """The peer channels of one UAV by covariance intersection, in channel order (after its absolute
+    channels; the arguments as ``update_uav``'s). Returns their FLOPs."""
+    flops = 0
+    S, Si = np.empty((3, 3)), np.empty((3, 3))
+    for l in range(kind.shape[0]):
+        ch = kind[l]
+        if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):
+            continue
+        r = r0[l] / max(alpha[l], alpha_min)
+        j = target[l]
+        if ch == PEER_REL:
+            for d in range(3):
+                hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
+            _ci_rel_block(x, P, prior_pp[j], hvec, r, S, Si)
+            flops += CI_REL_FLOPS
+        else:
+            d0, d1, d2 = x0[0] - prior_pos[j, 0], x0[1] - prior_pos[j, 1], x0[2] - prior_pos[j, 2]
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if rng < _MIN_RANGE:
+                continue
+            # at the prior, as every row: H = (p⁻ − p̂_j)ᵀ/‖p⁻ − p̂_j‖, y = z − h(x⁻) − H (x − x⁻)
+            hvec[0], hvec[1], hvec[2] = d0 / rng, d1 / rng, d2 / rng
+            y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
+            _ci_range_row(x, P, hvec, prior_pp[j], y, r, c)
+            flops += RANGE_ROW_FLOPS + CI_RANGE_FLOPS
+        active[l] = True
     return flops
 
 
@@ -328,8 +346,9 @@ def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, pri
         hvec = np.empty(3)
         c = np.empty(6)
         prior_pp = np.empty((n, 3, 3))
-        for i in range(n):
-            prior_pp[i] = P[b, i, :3, :3]
+        if peer_update == 1:
+            for i in range(n):
+                prior_pp[i] = P[b, i, :3, :3]
         for i in range(n):
             flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
                                     r0[i], anchors, landmarks, prior_pos[b], prior_pp, peer_update, alpha_th,
@@ -360,7 +379,8 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
                 predict_uav(x[b, i], P[b, i], imu[t, b, i], dt, q)
                 for d in range(3):
                     prior[i, d] = x[b, i, d]
-                prior_pp[i] = P[b, i, :3, :3]
+                if peer_update == 1:
+                    prior_pp[i] = P[b, i, :3, :3]
             for i in range(n):
                 update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
                            r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0, hvec, c)

@@ -155,10 +155,11 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
         if not score:
             continue
         live = not f.done[b]
-        for i in range(n):  # the broadcast covariances, before any UAV updates ("ci" reads them)
-            for d in range(3):
-                for e in range(3):
-                    prior_pp[i, d, e] = f.P[b, i, d, e]
+        if f.peer_update == 1:  # the broadcast covariances, before any UAV updates ("ci" reads them)
+            for i in range(n):
+                for d in range(3):
+                    for e in range(3):
+                        prior_pp[i, d, e] = f.P[b, i, d, e]
         for i in range(n):
             flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
                                f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], prior_pp,
