@@ -142,3 +142,12 @@ def test_core_runs_ci_and_keeps_covariances_healthy():
         core.step(np.ones((2, spec.n_uav, spec.n_channels)))
         assert np.array_equal(core.P, np.swapaxes(core.P, -1, -2))
         assert np.linalg.eigvalsh(core.P).min() > 0.0
+
+
+def test_every_adapter_takes_the_option():
+    gymnasium = pytest.importorskip("gymnasium")
+    import swarmloc.envs as envs
+
+    env = gymnasium.make("swarmloc/Scale4-v1", filter={"peer_update": "ci"})
+    assert env.unwrapped.task_spec.filter.peer_update == "ci"
+    assert envs.parallel_env("swarmloc/Scale4-v1", filter={"peer_update": "ci"}).task_spec.filter.peer_update == "ci"
