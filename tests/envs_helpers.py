@@ -1,4 +1,4 @@
-"""Helpers shared by the tests/test_envs_*.py files."""
+"""Helpers shared by the tests of the environments and the CEKF."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from swarmloc.envs.specs import Scoring
 from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.worlds import data_missing
+from swarmloc.envs.worlds import data_missing, make_world
 
 
 def short(task_id: str, steps: int) -> dict:
@@ -43,3 +43,17 @@ def assert_same(a, b) -> None:
         assert a.dtype == b.dtype and np.array_equal(a, b)
     else:
         assert a == b
+
+
+def record(task_id: str, n_steps: int, seeds=(3,), **overrides):
+    """Sense ``n_steps`` steps of a task; return the spec, world and stacked sequences."""
+    spec = get_spec(task_id, **overrides)
+    world = make_world(spec, len(seeds))
+    x0 = world.reset(list(seeds)).copy()
+    imu, z, valid = [], [], []
+    for _ in range(n_steps):
+        buf = world.sense()
+        imu.append(buf.imu.copy())
+        z.append(buf.z.copy())
+        valid.append(buf.valid.copy())
+    return spec, world, x0, np.array(imu), np.array(z), np.array(valid)

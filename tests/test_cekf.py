@@ -9,21 +9,9 @@ from swarmloc.envs import cekf
 from swarmloc.envs.cekf_reference import predict_reference, run_reference, update_reference
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.worlds import data_missing, make_world
+from swarmloc.envs.worlds import data_missing
 
-
-def record(task_id: str, n_steps: int, seeds=(3,), **overrides):
-    """Sense ``n_steps`` steps of a task; return the spec, world and stacked sequences."""
-    spec = get_spec(task_id, **overrides)
-    world = make_world(spec, len(seeds))
-    x0 = world.reset(list(seeds)).copy()
-    imu, z, valid = [], [], []
-    for _ in range(n_steps):
-        buf = world.sense()
-        imu.append(buf.imu.copy())
-        z.append(buf.z.copy())
-        valid.append(buf.valid.copy())
-    return spec, world, x0, np.array(imu), np.array(z), np.array(valid)
+from envs_helpers import record
 
 
 @pytest.mark.parametrize("task_id", sorted(CATALOGUE))

@@ -16,23 +16,15 @@ from swarmloc.envs import cekf
 from swarmloc.envs.cekf_reference import ci_peer_update, run_reference
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.worlds import make_world
+
+from envs_helpers import record
 
 
 @pytest.mark.parametrize("task_id, n_steps", [("swarmloc/HybridNoise10-v1", 25), ("swarmloc/GradualFault-v1", 150),
                                               ("swarmloc/Scale4-v1", 100)])
 def test_kernel_matches_reference(task_id, n_steps):
     """Peer ranges (HybridNoise, Scale) and relative positions (GradualFault), random trust."""
-    spec = get_spec(task_id, filter={"peer_update": "ci"})
-    world = make_world(spec, 1)
-    x0 = world.reset([5]).copy()
-    imu, z, valid = [], [], []
-    for _ in range(n_steps):
-        buf = world.sense()
-        imu.append(buf.imu.copy())
-        z.append(buf.z.copy())
-        valid.append(buf.valid.copy())
-    imu, z, valid = np.array(imu), np.array(z), np.array(valid)
+    spec, world, x0, imu, z, valid = record(task_id, n_steps, seeds=(5,), filter={"peer_update": "ci"})
     alpha = np.random.default_rng(3).uniform(0.0, 1.0, size=valid.shape)
     lay = world.layout
     P0 = cekf.initial_covariance(1, spec.n_uav, spec.filter.init_pos_sigma, spec.filter.init_vel_sigma)
