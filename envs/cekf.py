@@ -383,7 +383,8 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
                     prior_pp[i] = P[b, i, :3, :3]
             for i in range(n):
                 update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
-                           r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0, hvec, c)
+                           r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0,
+                           hvec, c)
                 for d in range(3):
                     est[t, b, i, d] = x[b, i, d]
 

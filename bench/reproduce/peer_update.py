@@ -96,7 +96,8 @@ def render(rows: list[dict], n_seeds: int) -> str:
              "|---|---:|" + "---:|" * len(METHODS)]
     for r in rows:
         cells = [f"{_cell(r['rmse']['point'][m])} / {_cell(r['rmse']['ci'][m])}" for m in METHODS]
-        lines.append(f"| {r['task'].removeprefix('swarmloc/')} | {np.mean(r['bound']):.3f} | " + " | ".join(cells) + " |")
+        name = r["task"].removeprefix("swarmloc/")
+        lines.append(f"| {name} | {np.mean(r['bound']):.3f} | " + " | ".join(cells) + " |")
     lines += ["", "## What each filter makes of the task", "",
               "Oracle beaten: the non-privileged policies better than the oracle by a paired 95 % CI "
               "(criterion 1 fails). uniform/bound ≥ 2: the fault matters (criterion 2). chi2-gate/uniform ≥ 2: "
