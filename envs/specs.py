@@ -183,6 +183,10 @@ class Sensors(Frozen):
     imu_sigma: NonNegFloat = 0.1
     imu_bias_sigma: NonNegFloat = Field(default=0.0, description="constant per-episode accelerometer bias std [m/s²]")
     anchor_sigma: PositiveFloat = 0.15
+    anchor_max_range: PositiveFloat = Field(
+        default=1e6, exclude_if=lambda value: value == 1e6,
+        description="UWB two-way ranging to an anchor only within this distance [m]; 1e6 = everywhere (every "
+                    "registered task; left out of the spec's canonical JSON at that value)")
     peers: PeerLinks = PeerLinks()
     camera_sigma: PositiveFloat = 0.15
     camera_max_range: PositiveFloat = 10.0

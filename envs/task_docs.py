@@ -111,7 +111,7 @@ def _faults(spec: TaskSpec) -> list[str]:
 _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cascades", "imu_cascade_random",
                      "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage",
                      "vision_outage_random", "gps_drift_random"}
-_DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "peers", "camera_sigma", "camera_max_range",
+_DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "anchor_max_range", "peers", "camera_sigma", "camera_max_range",
                       "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
 
 
@@ -137,7 +137,8 @@ def _measurement_model(spec: TaskSpec) -> str:
         where = (f"surveyed positions read from the data set (`{spec.trajectory.anchors}`)" if recorded
                  else f"{list(spec.anchors)} m")
         if s.tdoa is None:
-            lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, range σ {s.anchor_sigma:g} m.")
+            lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, range σ {s.anchor_sigma:g} m"
+                         + (f", ranged within {s.anchor_max_range:g} m." if s.anchor_max_range < 1e6 else "."))
         else:
             pairs = ", ".join(f"({i}, {j})" for i, j in s.tdoa.pairs)
             lines.append(f"- Anchors: {len(spec.anchors)} UWB anchors at {where}, transmitters only (TDOA: no two-way "

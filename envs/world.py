@@ -130,7 +130,7 @@ class World:
             anchors=self.anchors, landmarks=self.landmarks, kind=lay.kind, target=lay.target, linked=lay.linked,
             sigma=lay.sigma, imu_sigma=float(s.imu_sigma), camera_range=float(s.camera_max_range),
             camera_fov_cos=math.cos(math.radians(s.camera_fov_deg) / 2.0),
-            peer_range=float(s.peers.max_range), has_velocity=s.velocity_sigma is not None,
+            peer_range=float(s.peers.max_range), anchor_range=float(s.anchor_max_range), has_velocity=s.velocity_sigma is not None,
             velocity_sigma=float(s.velocity_sigma or 0.0), label_threshold=self.label_threshold, seeds=self.seeds,
             steps=self.steps,
             imu_const_bias=per_uav(), velocity_bias=per_uav(), gm_bias=per_channel(), gm_left=per_channel(),

@@ -46,7 +46,7 @@ class WorldInputs(NamedTuple):
         linked: ``(N, L)`` bool, the topology connects the slot.
         sigma: ``(N, L)`` nominal noise σ per scalar row [m].
         imu_sigma: accelerometer noise σ [m/s²].
-        camera_range, peer_range: landmark and peer visibility radius [m].
+        camera_range, peer_range, anchor_range: landmark, peer and anchor ranging radius [m].
         camera_fov_cos: cosine of half the camera's field of view; the camera looks along the
             UAV's velocity (−1: omnidirectional, every landmark in range is seen).
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
@@ -84,6 +84,7 @@ class WorldInputs(NamedTuple):
     camera_range: float
     camera_fov_cos: float
     peer_range: float
+    anchor_range: float
     has_velocity: bool
     velocity_sigma: float
     label_threshold: np.ndarray
@@ -274,7 +275,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             dy = pos[b, i, 1] - pos[b, j, 1]
                             dz = pos[b, i, 2] - pos[b, j, 2]
                         rng = math.sqrt(dx * dx + dy * dy + dz * dz)
-                    if ch == PEER and rng > w.peer_range:
+                    if (ch == PEER and rng > w.peer_range) or (ch == ANCHOR and rng > w.anchor_range):
                         ok = False
                     # scheduled / uniform NLOS windows
                     for wi in range(bias_time.shape[1]):

@@ -4,6 +4,8 @@ Against the readable reference (``cekf_reference.ci_peer_update``), against the 
 what covariance intersection promises (no correlation between the UAV's and the neighbour's
 errors makes the reported covariance optimistic), and the spec option's contract (the
 registered tasks' canonical JSON, hence every suite hash, is what it was before the option).
+Also the anchor ranging radius (``Sensors.anchor_max_range``), the other option such a study
+needs: with every anchor in range, peers add little to a consistent filter.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from swarmloc.envs import cekf
 from swarmloc.envs.cekf_reference import ci_peer_update, run_reference
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.tasks import CATALOGUE, get_spec
+from swarmloc.envs.worlds import make_world
 
 from envs_helpers import record
 
@@ -143,3 +146,22 @@ def test_every_adapter_takes_the_option():
     env = gymnasium.make("swarmloc/Scale4-v1", filter={"peer_update": "ci"})
     assert env.unwrapped.task_spec.filter.peer_update == "ci"
     assert envs.parallel_env("swarmloc/Scale4-v1", filter={"peer_update": "ci"}).task_spec.filter.peer_update == "ci"
+
+
+def test_anchor_max_range_drops_exactly_the_far_anchors():
+    """An anchor range is valid iff the true distance is within ``anchor_max_range`` (Scale has no other dropout)."""
+    spec = get_spec("swarmloc/Scale4-v1", sensors={"anchor_max_range": 11.0}, duration=20.0)
+    assert "anchor_max_range" in spec.model_dump_json()
+    assert "anchor_max_range" not in get_spec("swarmloc/Scale4-v1").model_dump_json()
+    world = make_world(spec, 2)
+    world.reset([1, 2])
+    anchors = np.asarray(spec.anchors)
+    seen_far = seen_near = 0
+    for _ in range(spec.n_steps):
+        buf = world.sense()
+        dist = np.linalg.norm(buf.pos[:, :, None, :] - anchors[None, None], axis=-1)  # (B, N, A)
+        valid = buf.valid[:, :, : len(anchors)]
+        assert np.array_equal(valid, dist <= 11.0)
+        seen_far += int((dist > 11.0).sum())
+        seen_near += int((dist <= 11.0).sum())
+    assert seen_far > 0 and seen_near > 0
