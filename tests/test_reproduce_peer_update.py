@@ -6,7 +6,15 @@ import json
 
 import numpy as np
 
-from swarmloc.bench.reproduce.peer_update import METHODS, _ceiling_beaten_by, peer_tasks, reproduce_peer_update
+from swarmloc.bench.reproduce.peer_update import (
+    METHODS,
+    VARIANTS,
+    _ceiling_beaten_by,
+    measure_task,
+    peer_tasks,
+    render,
+    reproduce_peer_update,
+)
 
 
 def test_covers_the_v1_tasks_with_peer_channels():
@@ -25,7 +33,7 @@ def test_ceiling_is_beaten_only_by_a_paired_ci():
 
 
 def test_report_and_the_peerless_policy_is_unchanged(tmp_path):
-    path = reproduce_peer_update(tmp_path / "pu.md", seeds=2, tasks=["Scale2-v1"], duration=8.0)
+    path = reproduce_peer_update(tmp_path / "pu.md", seeds=2, tasks=["Scale2-v1"], duration=8.0, variants=False)
     text = path.read_text()
     assert "| Scale2-v1 |" in text and "`point`" in text and "`ci`" in text
     raw = json.loads(path.with_suffix(".json").read_text())
@@ -34,3 +42,13 @@ def test_report_and_the_peerless_policy_is_unchanged(tmp_path):
     assert rmse["point"]["non-cooperative"] == rmse["ci"]["non-cooperative"]
     # uniform fuses the peers, and the two updates differ
     assert rmse["point"]["uniform"] != rmse["ci"]["uniform"]
+
+
+def test_a_variant_without_peers_is_one_filter():
+    """HybridNoise without peer links: the two updates are the same filter, for every policy, bit for bit."""
+    label = "HybridNoise30-v1, no peers"
+    task, overrides = VARIANTS[label]
+    row = measure_task(task, [1_000_000, 1_000_001], duration=6.0, overrides=overrides, label=label)
+    assert row["task"] == label
+    assert row["rmse"]["point"] == row["rmse"]["ci"]
+    assert "| HybridNoise30-v1, no peers |" in render([], 2, [row])

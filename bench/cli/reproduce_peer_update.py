@@ -17,6 +17,9 @@ class Options:
     """Test seeds per task (1_000_000 …), at least 2."""
     tasks: list[str] = field(default_factory=list)
     """Task IDs (default: every standard-v1 task with peer channels)."""
+    variants: bool = True
+    """Also measure the spec variants a consistent filter could start from (Scale with anchors ranged
+    within 11 m, HybridNoise without peers); not registered tasks."""
 
 
 def run(opts: Options) -> int:
@@ -25,7 +28,7 @@ def run(opts: Options) -> int:
     from swarmloc.envs.tasks import UnknownTaskError
 
     try:
-        path = reproduce_peer_update(opts.out, opts.seeds, opts.tasks or None)
+        path = reproduce_peer_update(opts.out, opts.seeds, opts.tasks or None, variants=opts.variants)
     except (ValueError, UnknownTaskError) as err:
         print(f"error: {err}")
         return 2

@@ -41,6 +41,15 @@ UPDATES: tuple[str, ...] = ("point", "ci")
 FAULT_MATTERS = 2.0
 #: a gate locks out when its RMSE is at least this × uniform's
 LOCK_OUT = 2.0
+#: spec variants a consistent-filter benchmark could start from (not registered): label → (task, overrides).
+#: Scale with anchors ranged within 11 m (outer UAVs then need their peers); HybridNoise without peers
+#: (is its heavy tail a trust problem once the peers cannot mask it?).
+VARIANTS: dict[str, tuple[str, dict]] = {
+    **{f"Scale{n}-v1, anchors within 11 m": (f"swarmloc/Scale{n}-v1", {"sensors": {"anchor_max_range": 11.0}})
+       for n in (2, 4, 8, 32)},
+    **{f"HybridNoise{p}-v1, no peers": (f"swarmloc/HybridNoise{p}-v1", {"sensors": {"peers": {"kind": "none"}}})
+       for p in (30, 50)},
+}
 
 
 def peer_tasks(tasks: Sequence[str] = STANDARD_V1_TASKS) -> list[str]:
@@ -60,15 +69,16 @@ def _ceiling_beaten_by(rmse: dict[str, np.ndarray]) -> list[str]:
     return out
 
 
-def measure_task(task: str, seeds: list[int], duration: float | None = None) -> dict:
-    """RMSE per seed of every method under both updates, and the bound, on one task (its episodes
-    cut to ``duration`` seconds if given)."""
-    over = {"duration": duration} if duration else {}
+def measure_task(task: str, seeds: list[int], duration: float | None = None, overrides: dict | None = None,
+                 label: str | None = None) -> dict:
+    """RMSE per seed of every method under both updates, and the bound, on one task (with spec
+    ``overrides``, its episodes cut to ``duration`` seconds if given)."""
+    over = {**(overrides or {}), **({"duration": duration} if duration else {})}
     base = get_spec(task, **over)
     bound = np.array([b.rmse for b in episode_bounds(base, seeds)], dtype=float)
-    row: dict = {"task": task, "bound": bound.tolist(), "rmse": {}}
+    row: dict = {"task": label or task, "bound": bound.tolist(), "rmse": {}}
     for update in UPDATES:
-        spec: TaskSpec = base if update == "point" else get_spec(task, filter={"peer_update": update}, **over)
+        spec: TaskSpec = base if update == "point" else get_spec(task, **{**over, "filter": {"peer_update": update}})
         rmse = {}
         for m in METHODS:
             metrics, _ = rollout(load_method(m, version=spec.version), spec, seeds)
@@ -85,21 +95,34 @@ def _cell(values: list[float]) -> str:
     return f"{v:.3f}" if v < 10 else f"{v:.1f}" if v < 100 else f"{v:.0f}"
 
 
-def render(rows: list[dict], n_seeds: int) -> str:
-    """The markdown report."""
+def render(rows: list[dict], n_seeds: int, variants: Sequence[dict] = ()) -> str:
+    """The markdown report: the registered tasks, then the ``VARIANTS`` measured (if any)."""
     lines = ["# The CEKF's peer update: a known point (registered) against covariance intersection", "",
              f"Standard-v1 tasks with peer channels, {n_seeds} test seeds each (1000000 …). RMSE [m], task "
              "mean; each cell is *point* / *ci* on the same episodes. `point` is the registered filter "
              "(madrl §2.3); `ci` is `get_spec(task, filter={\"peer_update\": \"ci\"})`. The bound does not "
-             "depend on the filter.", "",
-             "| task | bound | " + " | ".join(f"`{m}`" for m in METHODS) + " |",
+             "depend on the filter.", ""]
+    lines += _tables(rows)
+    lines += _scale_lines(rows)
+    if variants:
+        lines += ["", "## Variants a consistent filter could start from (not registered)", "",
+                  "The same measurements on spec variants of the registered tasks (`VARIANTS` in "
+                  "`swarmloc.bench.reproduce.peer_update`): the Scale tasks with the anchors ranged within 11 m "
+                  "(`sensors={\"anchor_max_range\": 11.0}`), the HybridNoise tasks without peer links "
+                  "(`sensors={\"peers\": {\"kind\": \"none\"}}`; both updates are then the same filter).", ""]
+        lines += _tables(list(variants))
+    return "\n".join(lines) + "\n"
+
+
+def _tables(rows: list[dict]) -> list[str]:
+    """The RMSE table, the per-task verdicts and their counts."""
+    lines = ["| task | bound | " + " | ".join(f"`{m}`" for m in METHODS) + " |",
              "|---|---:|" + "---:|" * len(METHODS)]
     for r in rows:
         cells = [f"{_cell(r['rmse']['point'][m])} / {_cell(r['rmse']['ci'][m])}" for m in METHODS]
         name = r["task"].removeprefix("swarmloc/")
         lines.append(f"| {name} | {np.mean(r['bound']):.3f} | " + " | ".join(cells) + " |")
-    lines += ["", "## What each filter makes of the task", "",
-              "Oracle beaten: the non-privileged policies better than the oracle by a paired 95 % CI "
+    lines += ["", "What each filter makes of the task. Oracle beaten: the non-privileged policies better than the oracle by a paired 95 % CI "
               "(criterion 1 fails). uniform/bound ≥ 2: the fault matters (criterion 2). chi2-gate/uniform ≥ 2: "
               "the one-step gate locks channels out (docs/methods.md).", "",
               "| task | oracle beaten (point) | oracle beaten (ci) | uniform/bound point | ci | "
@@ -117,8 +140,7 @@ def render(rows: list[dict], n_seeds: int) -> str:
     for u in UPDATES:
         lines.append(f"| `{u}` | {count[u]['beaten']}/{len(rows)} | {count[u]['matters']}/{len(rows)} "
                      f"| {count[u]['lock_out']}/{len(rows)} |")
-    lines += _scale_lines(rows)
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def _scale_lines(rows: list[dict]) -> list[str]:
@@ -138,12 +160,17 @@ def _scale_lines(rows: list[dict]) -> list[str]:
 
 
 def reproduce_peer_update(out: Path, seeds: int = 32, tasks: Sequence[str] | None = None,
-                          duration: float | None = None) -> Path:
-    """Measure and write ``<out>`` (markdown, + .json beside it); returns its path."""
+                          duration: float | None = None, variants: bool = True) -> Path:
+    """Measure and write ``<out>`` (markdown, + .json beside it); returns its path.
+
+    ``tasks`` None: every standard-v1 task with peers; ``variants``: also the ``VARIANTS``.
+    """
     chosen = peer_tasks() if tasks is None else [get_spec(t).task_id for t in tasks]
     S = seeds_from(seeds)
     rows = [measure_task(t, S, duration) for t in chosen]
-    return write_paper_report(out, "peer-update", render(rows, len(S)), {"seeds": S, "tasks": rows})
+    extra = [measure_task(t, S, duration, over, label) for label, (t, over) in VARIANTS.items()] if variants else []
+    return write_paper_report(out, "peer-update", render(rows, len(S), extra),
+                              {"seeds": S, "tasks": rows, "variants": extra})
 
 
-__all__ = ["METHODS", "UPDATES", "measure_task", "peer_tasks", "render", "reproduce_peer_update"]
+__all__ = ["METHODS", "UPDATES", "VARIANTS", "measure_task", "peer_tasks", "render", "reproduce_peer_update"]
