@@ -9,21 +9,20 @@ Prediction (constant acceleration over dt, IMU reading u):
 Update (madrl §2.3): one joint update over the channels whose trust α > α_th, each with
 R_j = R0_j / max(α_j, α_min); Jacobians at the prior; peer channels use the neighbour's
 broadcast prior position as a known point (``peer_update = "point"``, every registered task).
+A TDOA channel of anchor pair (i, j) is one scalar row h = ‖p − a_j‖ − ‖p − a_i‖ with
+H = u_j − u_i on the position block (u_k the unit vector from anchor k to the prior position).
 
 ``peer_update = "ci"`` (a spec option, ``FilterSettings.peer_update``): the absolute channels
 first, as one joint update; then each peer channel in channel order, by covariance
 intersection (Julier and Uhlmann 1997) over the UAV's estimate and the neighbour's broadcast
 one, whose error correlation the UAV cannot know. The joint prior of (x_i, p_j) is bounded
-by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = h on p_i, −h on p_j)
-    S = hᵀP_i h/ω + hᵀP_j h/(1 − ω) + r,   K = (P_i/ω) hᵀ / S,   P_i⁺ = P_i/ω − K hᵀ P_i/ω,
+by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = hᵀ on p_i, −hᵀ on p_j)
+    S = hᵀP_i h/ω + hᵀP_j h/(1 − ω) + r,   K = (P_i/ω) Hᵀ / S,   P_i⁺ = P_i/ω − K H P_i/ω,
 i.e. the point update with R = ω r + ω hᵀP_j h/(1 − ω) followed by P ← P/ω. A relative
 position (z = p_j − p_i) is one 3-row block of the same form with S = A/ω + B/(1 − ω) + r I
-(A, B the two position covariances). ω minimises tr of P_i⁺'s position block on a grid of
-``CI_GRID`` points; ω = 1 (no update) whenever the peer adds nothing, so a peer can never
-make the bound worse than the UAV's own. P_j is the neighbour's prior at this step (the
-broadcast one), read before any UAV updates. A TDOA channel of anchor pair (i, j) is one
-scalar row h = ‖p − a_j‖ − ‖p − a_i‖ with H = u_j − u_i on the position block (u_k the unit
-vector from anchor k to the prior position).
+(A, B the two position covariances). ω minimises the trace of P_i⁺'s position block on a grid
+of ``CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
+neighbour's prior at this step (the broadcast one), read before any UAV updates.
 
 The kernel processes the joint update as a sequence of scalar rows, all linearised at the
 prior x⁻: for rows z_r = h_r(x⁻) + H_r (x − x⁻) + v_r with diagonal R, sequential linear

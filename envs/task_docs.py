@@ -111,8 +111,8 @@ def _faults(spec: TaskSpec) -> list[str]:
 _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cascades", "imu_cascade_random",
                      "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage",
                      "vision_outage_random", "gps_drift_random"}
-_DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "anchor_max_range", "peers", "camera_sigma", "camera_max_range",
-                      "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
+_DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "anchor_max_range", "peers", "camera_sigma",
+                      "camera_max_range", "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
 
 
 def _other_fields(model, described: set[str]) -> list[tuple[str, object]]:
@@ -148,6 +148,7 @@ def _measurement_model(spec: TaskSpec) -> str:
         kind = "range" if s.peers.kind == "range" else "relative position (3-vector)"
         lines.append(f"- Peers: UWB {kind} to other UAVs, topology `{s.peers.topology}`, σ {s.peers.sigma:g} m; "
                      "fused against the neighbour's broadcast prior estimate"
+                     + (" by covariance intersection" if spec.filter.peer_update == "ci" else "")
                      + (f"; max range {s.peers.max_range:g} m." if s.peers.max_range < 1e6 else "."))
     if spec.landmarks:
         lines.append(f"- Camera: {len(spec.landmarks)} landmarks, relative position σ {s.camera_sigma:g} m per "

@@ -144,7 +144,8 @@ def _tables(rows: list[dict]) -> list[str]:
 
 
 def _scale_lines(rows: list[dict]) -> list[str]:
-    """Uniform's growth with the swarm size (the Scale family's phenomenon, docs/calibration.md) under each filter."""
+    """Uniform's growth with the swarm size under each filter (the Scale family's phenomenon,
+    docs/calibration.md)."""
     by_n = {int(r["task"].removeprefix("swarmloc/Scale").removesuffix("-v1")): r for r in rows
             if r["task"].removeprefix("swarmloc/Scale").removesuffix("-v1").isdigit()}
     if len(by_n) < 2:
