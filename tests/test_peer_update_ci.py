@@ -165,3 +165,20 @@ def test_anchor_max_range_drops_exactly_the_far_anchors():
         seen_far += int((dist > 11.0).sum())
         seen_near += int((dist <= 11.0).sum())
     assert seen_far > 0 and seen_near > 0
+
+
+def test_ci_is_the_same_batched_or_single():
+    """Determinism: each episode's CI filter sees only its own broadcast covariances."""
+    spec = get_spec("swarmloc/HybridNoise10-v1", filter={"peer_update": "ci"}, duration=5.0)
+    seeds = [4, 5, 6]
+    trust = np.random.default_rng(2).uniform(0.0, 1.0, size=(spec.n_steps, len(seeds), spec.n_uav, spec.n_channels))
+    batched = LinkTrustCore(spec, len(seeds))
+    batched.reset(seeds)
+    for k in range(spec.n_steps):
+        batched.step(trust[k])
+    for b, seed in enumerate(seeds):
+        single = LinkTrustCore(spec, 1)
+        single.reset([seed])
+        for k in range(spec.n_steps):
+            single.step(trust[k, b:b + 1])
+        assert np.array_equal(single.x[0], batched.x[b]) and np.array_equal(single.P[0], batched.P[b])
