@@ -119,6 +119,10 @@ def update_reference(x: np.ndarray, P: np.ndarray, z: np.ndarray, valid: np.ndar
     update of the absolute channels, then each peer channel by :func:`ci_peer_update`, in
     channel order, linearised at the prior like the others.
     """
+    if peer_update not in ("point", "ci"):
+        raise ValueError(f"peer_update must be 'point' or 'ci', got {peer_update!r}")
+    if peer_update == "ci" and prior_cov is None:
+        raise ValueError("peer_update='ci' needs prior_cov, the (N, 6, 6) broadcast covariances")
     peers = np.isin(kind, (PEER, PEER_REL)) if peer_update == "ci" else np.zeros(len(kind), dtype=bool)
     x_post, P_post, active = _joint_update(x, P, z, valid & ~peers, alpha, kind, target, r0, anchors, landmarks,
                                            prior_pos, alpha_th, alpha_min)
