@@ -155,8 +155,11 @@ def _inv3(S, out):
 
 
 @njit(cache=True, inline="always")
-def _ci_rel_block(x, P, Pj, m, r, S, Si):
-    """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω."""
+def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
+    """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω.
+
+    S, Si: scratch 3×3; K: scratch 6×3; top: scratch 3×6.
+    """
     tr = P[0, 0] + P[1, 1] + P[2, 2]
     best, best_w = tr, 1.0
     for k in range(1, CI_GRID):
@@ -185,7 +188,6 @@ def _ci_rel_block(x, P, Pj, m, r, S, Si):
     _inv3(S, Si)
     _scale_cov(P, 1.0 / w)
     # K = P[:, :3] S⁻¹ (on the scaled P), y = m − p
-    K = np.empty((6, 3))
     for a in range(6):
         for v in range(3):
             K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
@@ -193,7 +195,9 @@ def _ci_rel_block(x, P, Pj, m, r, S, Si):
     for a in range(6):
         x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
     # P ← P − K P[:3, :] (upper triangle, mirrored; P[:3, :] read from a copy)
-    top = P[:3, :].copy()
+    for u in range(3):
+        for v in range(6):
+            top[u, v] = P[u, v]
     for a in range(6):
         for b2 in range(a, 6):
             v = P[a, b2] - (K[a, 0] * top[0, b2] + K[a, 1] * top[1, b2] + K[a, 2] * top[2, b2])
@@ -292,7 +296,7 @@ def _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alph
     """The peer channels of one UAV by covariance intersection, in channel order (after its absolute
     channels; the arguments as ``update_uav``'s). Returns their FLOPs."""
     flops = 0
-    S, Si = np.empty((3, 3)), np.empty((3, 3))
+    S, Si, K, top = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((3, 6))
     for l in range(kind.shape[0]):
         ch = kind[l]
         if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):
@@ -302,7 +306,7 @@ def _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alph
         if ch == PEER_REL:
             for d in range(3):
                 hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
-            _ci_rel_block(x, P, prior_pp[j], hvec, r, S, Si)
+            _ci_rel_block(x, P, prior_pp[j], hvec, r, S, Si, K, top)
             flops += CI_REL_FLOPS
         else:
             d0, d1, d2 = x0[0] - prior_pos[j, 0], x0[1] - prior_pos[j, 1], x0[2] - prior_pos[j, 2]

@@ -27,8 +27,8 @@ import numpy as np
 from swarmloc.agents.registry import load_method
 from swarmloc.bench.evaluation.bounds import episode_bounds
 from swarmloc.bench.evaluation.runner import rollout
-from swarmloc.bench.evaluation.stats import bootstrap_ci
 from swarmloc.bench.evaluation.suites import STANDARD_V1_TASKS
+from swarmloc.bench.reproduce import calibration_criteria as C
 from swarmloc.bench.reproduce.common import seeds_from, write_paper_report
 from swarmloc.envs.channels import PEER, PEER_REL, build_layout
 from swarmloc.envs.specs import TaskSpec
@@ -37,8 +37,6 @@ from swarmloc.envs.tasks import get_spec
 #: the trust policies compared (the oracle is privileged; the others are not)
 METHODS: tuple[str, ...] = ("uniform", "oracle", "non-cooperative", "chi2-gate", "chi2-soft")
 UPDATES: tuple[str, ...] = ("point", "ci")
-#: criterion 2 of the calibration: the fault matters when uniform ≥ this × the bound
-FAULT_MATTERS = 2.0
 #: a gate locks out when its RMSE is at least this × uniform's
 LOCK_OUT = 2.0
 #: spec variants a consistent-filter benchmark could start from (not registered): label → (task, overrides).
@@ -59,14 +57,7 @@ def peer_tasks(tasks: Sequence[str] = STANDARD_V1_TASKS) -> list[str]:
 
 def _ceiling_beaten_by(rmse: dict[str, np.ndarray]) -> list[str]:
     """The non-privileged policies better than the oracle by a paired 95 % CI (log2 RMSE ratio)."""
-    out = []
-    for m in METHODS:
-        if m == "oracle":
-            continue
-        lo, _ = bootstrap_ci(np.log2(rmse["oracle"] / rmse[m]))
-        if lo > 0:
-            out.append(m)
-    return out
+    return [m for m in METHODS if m != "oracle" and C.kind_rule(rmse, probe=m)["position"] == "above"]
 
 
 def measure_task(task: str, seeds: list[int], duration: float | None = None, overrides: dict | None = None,
@@ -133,7 +124,7 @@ def _tables(rows: list[dict]) -> list[str]:
                      f"| {', '.join(c['ceiling_beaten_by']) or '—'} | {p['uniform_over_bound']:.2f} "
                      f"| {c['uniform_over_bound']:.2f} | {p['gate_over_uniform']:.2f} | {c['gate_over_uniform']:.2f} |")
     count = {u: {"beaten": sum(bool(r[u]["ceiling_beaten_by"]) for r in rows),
-                 "matters": sum(r[u]["uniform_over_bound"] >= FAULT_MATTERS for r in rows),
+                 "matters": sum(r[u]["uniform_over_bound"] >= C.FAULT_MATTERS_RATIO for r in rows),
                  "lock_out": sum(r[u]["gate_over_uniform"] >= LOCK_OUT for r in rows)} for u in UPDATES}
     lines += ["", "| filter | oracle beaten | uniform ≥ 2× bound | chi2-gate ≥ 2× uniform |",
               "|---|---:|---:|---:|"]
