@@ -182,3 +182,17 @@ def test_ci_is_the_same_batched_or_single():
         for k in range(spec.n_steps):
             single.step(trust[k, b:b + 1])
         assert np.array_equal(single.x[0], batched.x[b]) and np.array_equal(single.P[0], batched.P[b])
+
+
+def test_without_peer_links_both_updates_are_one_filter():
+    """HybridNoise with the peer links removed: "point" and "ci" give the same filter, bit for bit."""
+    out = {}
+    for update in ("point", "ci"):
+        spec = get_spec("swarmloc/HybridNoise30-v1", sensors={"peers": {"kind": "none"}},
+                        filter={"peer_update": update}, duration=5.0)
+        core = LinkTrustCore(spec, 2)
+        core.reset([1, 2])
+        for _ in range(spec.n_steps):
+            core.step(np.ones((2, spec.n_uav, spec.n_channels)))
+        out[update] = (core.x.copy(), core.P.copy())
+    assert np.array_equal(out["point"][0], out["ci"][0]) and np.array_equal(out["point"][1], out["ci"][1])
