@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cekf
-from .core_kernel import FilterArrays, core_step, make_handle
+from .core_kernel import FilterArrays, make_handle, step_kernel
 from .labels import label_thresholds
 from .specs import TaskSpec
 from .world import World
@@ -116,7 +116,7 @@ class LinkTrustCore:
 
     # ------------------------------------------------------------------ internals
     def _init_kernel(self) -> None:
-        """Bind the step kernel to the core's and the world's arrays (``core_kernel.core_step``)."""
+        """Bind the step kernel to the core's and the world's arrays (``core_kernel.step_kernel``)."""
         w, s, o, buf = self.world, self.spec, self._out, self.world.buffers
         self._filter = FilterArrays(
             dt=float(s.dt), imu_sigma=float(s.sensors.imu_sigma), alpha_th=float(s.filter.alpha_th),
@@ -137,6 +137,7 @@ class LinkTrustCore:
         self._senses = isinstance(w, World)
         world_arrays = (w.inputs, w.schedule) if self._senses else (None, None)
         self._handle = make_handle(*world_arrays, self._filter)
+        self._step = step_kernel(self.batch_size)
         self._everyone = np.ones(self.batch_size, dtype=bool)
 
     def _advance(self, mask: np.ndarray | None = None, trust: np.ndarray | None = None) -> None:
@@ -148,11 +149,11 @@ class LinkTrustCore:
         go = self._everyone if mask is None else mask
         score = trust is not None
         if self._senses:
-            core_step(self._handle, trust if score else self._out.applied, score, go)
+            self._step(self._handle, trust if score else self._out.applied, score, go)
             return
         w, f = self.world, self._filter
         if score:
-            core_step(self._handle, trust, True, ~self._everyone)
+            self._step(self._handle, trust, True, ~self._everyone)
             go = go & ~f.done
         keep = ~go
         saved = [a[keep].copy() for a in self._world_state()] if keep.any() else []
@@ -160,7 +161,7 @@ class LinkTrustCore:
         w.sense()
         for array, value in zip(self._world_state(), saved):
             array[keep] = value
-        core_step(self._handle, self._out.applied, False, go)
+        self._step(self._handle, self._out.applied, False, go)
 
     # ------------------------------------------------------------------ API
     def reset(self, seeds: np.ndarray | list[int], mask: np.ndarray | None = None) -> CoreStep:
@@ -224,6 +225,8 @@ class LinkTrustCore:
             raise RuntimeError("every episode is done; call reset() first")
         # one kernel call: the update and its outputs (estimate, truth, labels, validity,
         # trust, FLOPs, step count) for the live episodes, then the next pending step of
-        # those that are not done (core_kernel.core_step)
-        self._advance(trust=trust)
+        # those that are not done (core_kernel.step_kernel). A view (a slice, a transpose) is
+        # copied to one contiguous layout: the kernel is compiled for that layout only, and a
+        # second layout would cost a second compilation of the whole step (minutes, cold).
+        self._advance(trust=np.ascontiguousarray(trust, dtype=np.float64))
         return o

@@ -2,9 +2,9 @@
 and featurize the next step.
 
 ``FilterArrays`` names the CEKF state and the ``CoreStep`` outputs. ``step_episodes`` steps
-a range of episodes; ``core_step`` steps the batch in one call (threads over blocks of
-episodes, or the calling thread for a small batch) and takes its named tuples through a
-``StepHandle``. Per episode b, with trust α (scoring):
+a range of episodes; ``core_step`` steps the batch in one call on the calling thread and
+``core_step_threaded`` with threads over blocks of episodes (``step_kernel`` picks one by
+batch size); both take their named tuples through a ``StepHandle``. Per episode b, with trust α (scoring):
 
 1. posterior at the pending step k: the trust-weighted joint update (``cekf.update_uav``);
    estimate, truth, labels, validity, trust and FLOPs of the update are written out; the
@@ -255,14 +255,27 @@ def _step_blocks(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArray
 
 @njit(cache=True, error_model="numpy")
 def core_step(h: StepHandle, trust: np.ndarray, score: bool, advance: np.ndarray) -> None:
-    """One step of every episode (``step_episodes`` over the batch; threads over blocks of
-    episodes from ``SERIAL_BELOW`` episodes on).
+    """One step of every episode, on the calling thread (``step_episodes`` over the batch).
 
     Args:
         h: the world inputs, fault schedule and filter arrays.
         trust, score, advance: as in ``step_episodes``.
     """
-    if advance.shape[0] < SERIAL_BELOW:
-        step_episodes(h.world, h.faults, h.filt, trust, score, advance, 0, advance.shape[0])
-    else:
-        _step_blocks(h.world, h.faults, h.filt, trust, score, advance)
+    step_episodes(h.world, h.faults, h.filt, trust, score, advance, 0, advance.shape[0])
+
+
+@njit(cache=True, error_model="numpy")
+def core_step_threaded(h: StepHandle, trust: np.ndarray, score: bool, advance: np.ndarray) -> None:
+    """``core_step`` with threads over blocks of ``BLOCK`` episodes (``_step_blocks``)."""
+    _step_blocks(h.world, h.faults, h.filt, trust, score, advance)
+
+
+def step_kernel(batch_size: int):
+    """The step kernel for a batch: ``core_step`` below ``SERIAL_BELOW`` episodes, else
+    ``core_step_threaded``.
+
+    Two kernels chosen once per core, rather than one that branches on the batch size, so
+    that a process that only steps small batches never compiles the threaded one: its
+    parallel lowering is most of the cold compilation of the step (about 130 s of 185 s).
+    """
+    return core_step if batch_size < SERIAL_BELOW else core_step_threaded
