@@ -24,7 +24,7 @@ from .faults import FaultSchedule, build_schedule
 from .labels import label_thresholds
 from .specs import TaskSpec
 from .trajectories import N_PARAMS, trajectory_kind, trajectory_params
-from .world_kernel import WorldInputs, reset_episodes, sense_batch
+from .world_kernel import WorldInputs, reset_episodes, sense_kernel
 
 
 def validate_seeds(seeds: np.ndarray | list[int]) -> np.ndarray:
@@ -144,6 +144,7 @@ class World:
                                     injected=w.injected, label_v1=w.label_v1, systematic=w.systematic,
                                     velocity=w.velocity if w.has_velocity else None)
         self._everyone = np.ones(n_b, dtype=np.bool_)
+        self._sense = sense_kernel(n_b)
 
     @property
     def imu_const_bias(self) -> np.ndarray:
@@ -183,5 +184,5 @@ class World:
 
     def sense(self) -> SenseBuffers:
         """Advance every episode by one step and fill the step buffers."""
-        sense_batch(self.inputs, self.schedule, self._everyone)
+        self._sense(self.inputs, self.schedule, self._everyone)
         return self.buffers

@@ -3,7 +3,8 @@
 ``WorldInputs`` names the task, the episode state and the step buffers, the
 ``FaultSchedule`` (``faults.py``) the episodes' fault windows. ``sense_episodes(w, fs, go,
 lo, hi)`` advances a range of episodes by one step on the calling thread (the link-trust
-core calls it inside its own step kernel), ``sense_batch`` the whole batch, and
+core calls it inside its own step kernel), ``sense_batch`` the whole batch (and
+``sense_batch_threaded`` with threads over blocks of episodes), and
 ``reset_episodes`` starts episodes at step 0. Every fault acts inside the kernel: range
 biases, Gauss–Markov NLOS, IMU cascades, camera and UWB outages, GPS drift, hybrid GPS
 noise, packet loss; visual odometry is sensed beside the truth. All draws come from the
@@ -391,16 +392,26 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                                                       systematic[b, i, l, 2], sg) > label_threshold[i, l]
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def sense_batch(w: WorldInputs, fs: FaultSchedule, go: np.ndarray) -> None:
-    """Advance the episodes with ``go[b]`` by one step, threads over blocks of episodes."""
+    """Advance the episodes with ``go[b]`` by one step, on the calling thread."""
+    sense_episodes(w, fs, go, 0, go.shape[0])
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def sense_batch_threaded(w: WorldInputs, fs: FaultSchedule, go: np.ndarray) -> None:
+    """``sense_batch`` with threads over blocks of ``BLOCK`` episodes."""
     n_b = go.shape[0]
-    if n_b < SERIAL_BELOW:
-        sense_episodes(w, fs, go, 0, n_b)
-        return
     for block in prange((n_b + BLOCK - 1) // BLOCK):
         lo, hi = block_bounds(block, n_b)
         sense_episodes(w, fs, go, lo, hi)
+
+
+def sense_kernel(batch_size: int):
+    """``sense_batch`` below ``SERIAL_BELOW`` episodes, else ``sense_batch_threaded``: chosen
+    once per world, so that a process that only senses small batches never compiles the
+    parallel lowering (as ``core_kernel.step_kernel``)."""
+    return sense_batch if batch_size < SERIAL_BELOW else sense_batch_threaded
 
 
 @njit(cache=True, error_model="numpy")
