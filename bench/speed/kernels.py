@@ -32,6 +32,10 @@ from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 
 BATCHES = (1, 64, 1024, 4096)
+#: ``--quick`` (a smoke run): batches below ``SERIAL_BELOW``, so that it compiles only the
+#: calling-thread kernels; the threaded ones cost minutes of cold compilation, and their
+#: equality with the calling-thread ones is tested on its own (tests/test_world_kernel.py)
+QUICK_BATCHES = (1, 16)
 #: modules exposing ``measure_rows(quick: bool) -> list[dict]`` appended to the table when importable
 EXTRA_ROWS = ("swarmloc.bench.speed.world:measure_rows", "swarmloc.bench.speed.envs:measure_env_rows",
               "swarmloc.bench.speed.estimators:measure_rows", "swarmloc.bench.speed.evaluation:measure_rows")
@@ -152,7 +156,7 @@ def machine_info() -> dict:
 def measure(quick: bool = False) -> list[dict]:
     """Measure every row; ``quick`` shortens the runs (for smoke tests)."""
     n_steps = 40 if quick else 400
-    batches = (1, 64) if quick else BATCHES
+    batches = QUICK_BATCHES if quick else BATCHES
     rec = record(max(batches), n_steps if max(batches) <= 1024 else 100)
     t_steps = rec.z.shape[0]
     rows: list[dict] = []

@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 
+from swarmloc.bench.speed.kernels import BATCHES, QUICK_BATCHES
 from swarmloc.envs import cekf
 from swarmloc.envs.core import LinkTrustCore
 from swarmloc.envs.specs import TaskSpec
@@ -27,7 +28,6 @@ from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.world import World
 
 TASK = "swarmloc/Scale6-v0"
-BATCHES = (1, 64, 1024, 4096)
 
 
 class UnfusedCore:
@@ -114,10 +114,10 @@ def time_steps(core: LinkTrustCore | UnfusedCore, batch: int, n_steps: int, repe
 
 
 def measure_rows(quick: bool = False) -> list[dict]:
-    """The ``world`` and ``world-unfused`` rows at every batch size (``quick``: B = 1, 64, short runs)."""
+    """The ``world`` and ``world-unfused`` rows at every batch size (``quick``: ``QUICK_BATCHES``, short runs)."""
     spec = get_spec(TASK)
     rows = []
-    for batch in (1, 64) if quick else BATCHES:
+    for batch in QUICK_BATCHES if quick else BATCHES:
         n_steps = 20 if quick else (300 if batch <= 64 else 50)
         repeats = 2 if quick else (5 if batch <= 64 else 3)
         for impl, make in (("world", LinkTrustCore), ("world-unfused", UnfusedCore)):
