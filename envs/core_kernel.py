@@ -25,6 +25,7 @@ bit-identical, only fused.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -270,7 +271,7 @@ def core_step_threaded(h: StepHandle, trust: np.ndarray, score: bool, advance: n
     _step_blocks(h.world, h.faults, h.filt, trust, score, advance)
 
 
-def step_kernel(batch_size: int):
+def step_kernel(batch_size: int) -> Callable[..., None]:
     """The step kernel for a batch: ``core_step`` below ``SERIAL_BELOW`` episodes, else
     ``core_step_threaded``.
 

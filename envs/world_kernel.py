@@ -18,6 +18,7 @@ anchor, so it adds to the range difference.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -407,7 +408,7 @@ def sense_batch_threaded(w: WorldInputs, fs: FaultSchedule, go: np.ndarray) -> N
         sense_episodes(w, fs, go, lo, hi)
 
 
-def sense_kernel(batch_size: int):
+def sense_kernel(batch_size: int) -> Callable[..., None]:
     """``sense_batch`` below ``SERIAL_BELOW`` episodes, else ``sense_batch_threaded``: chosen
     once per world, so that a process that only senses small batches never compiles the
     parallel lowering (as ``core_kernel.step_kernel``)."""

@@ -7,6 +7,7 @@ import pytest
 
 from swarmloc.bench.speed.world import UnfusedCore
 from swarmloc.envs.core import SERIAL_BELOW, LinkTrustCore
+from swarmloc.envs.core_kernel import core_step, core_step_threaded, step_kernel
 from swarmloc.envs.rng import normal, student_t, uniform
 from swarmloc.envs.tasks import get_spec
 from swarmloc.envs.worlds import data_missing, make_world
@@ -57,6 +58,26 @@ def test_parallel_blocks_equal_single_episodes(task_id):
             for name in ("estimate", "resid", "nis", "jerk", "label", "label_v1", "flops"):
                 assert np.array_equal(getattr(out, name)[b], getattr(one, name)[0]), (name, b)
             assert np.array_equal(batch.pending_systematic_sigmas[b], core.pending_systematic_sigmas[0]), b
+
+
+def test_a_view_of_trust_steps_as_its_copy_and_compiles_nothing_new():
+    """A transposed (non-contiguous) trust gives the contiguous copy's numbers, through the one
+    compiled step: a second array layout would be a second compilation of the whole step."""
+    spec = get_spec("swarmloc/NLOS-v1", duration=2.0)
+    seeds = [5, 6]
+    assert step_kernel(len(seeds)) is core_step and step_kernel(SERIAL_BELOW) is core_step_threaded
+    view_core, copy_core = LinkTrustCore(spec, len(seeds)), LinkTrustCore(spec, len(seeds))
+    view_core.reset(seeds)
+    copy_core.reset(seeds)
+    rng = np.random.default_rng(1)
+    signatures = list(core_step.signatures)  # reset has run the step (without scoring)
+    for _ in range(5):
+        trust = rng.uniform(0.0, 1.0, (spec.n_channels, spec.n_uav, len(seeds))).T
+        assert not trust.flags.c_contiguous
+        a, b = view_core.step(trust), copy_core.step(np.ascontiguousarray(trust))
+        for name in FIELDS:
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert list(core_step.signatures) == signatures
 
 
 def _snapshot(core: LinkTrustCore) -> dict[str, np.ndarray]:
