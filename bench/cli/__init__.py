@@ -38,6 +38,7 @@ COMMANDS: CommandTable = {
     "methods": "swarmloc.bench.cli.methods",
     "evaluate": "swarmloc.bench.cli.evaluate",
     "plot": "swarmloc.bench.cli.plot",
+    "compare": "swarmloc.bench.cli.compare",
     "explain": "swarmloc.bench.cli.explain",
     "demo": "swarmloc.bench.cli.demo",
     "submit": "swarmloc.bench.cli.submit",

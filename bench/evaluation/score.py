@@ -202,16 +202,49 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
                       uncovered=tuple(t for t in all_tasks if t not in covered))
 
 
+def _paired_gains(scores: Sequence[SuiteScore], task: str) -> np.ndarray:
+    """``(methods, n)``: each score's gains on ``task`` in seed order, checked to be the same episodes."""
+    seeds, rows = None, []
+    for score in scores:
+        t = score.tasks.get(task)
+        if t is None or t.seeds is None:
+            raise ValueError(f"every score must cover {task} with its seeds to be paired")
+        order = np.argsort(t.seeds, kind="stable")
+        if seeds is not None and not np.array_equal(t.seeds[order], seeds):
+            raise ValueError(f"{task}: the scores ran different seeds; only the same episodes pair")
+        seeds = t.seeds[order]
+        rows.append(t.gains[order])
+    return np.stack(rows)
+
+
+def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int, seed: int) -> dict[str, np.ndarray]:
+    """Per task, ``(methods, n_resamples)`` resampled task means, one draw of seeds shared by every method.
+
+    The stratified bootstrap of :func:`bootstrap_suite_ci`, paired: each resample draws a
+    task's seeds once and applies that draw to every method, so two methods are compared
+    episode by episode (same task, same seed: the same world).
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    tasks = list(dict.fromkeys(task for score in scores for task in score.tasks))  # _paired_gains: all cover each
+    rng = np.random.default_rng(seed)
+    out = {}
+    for task in tasks:
+        gains = _paired_gains(scores, task)
+        picks = rng.integers(0, gains.shape[1], size=(n_resamples, gains.shape[1]))
+        out[task] = gains[:, picks].mean(axis=2)
+    return out
+
+
 def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED,
                     confidence: float = 0.95) -> list[int]:
     """Each method's rank as 1 + the number of others whose S is higher beyond doubt.
 
-    "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0. The CI
-    is a stratified bootstrap that draws the seeds of each task once and applies that draw to
-    every method, so two methods are compared episode by episode (same task, same seed: the
-    same world). Two methods whose difference the seeds cannot resolve share a rank. Ranks
-    are not always consecutive: with A ahead of B beyond doubt and C level with both, the
-    ranks are 1, 2, 1.
+    "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0
+    (:func:`_paired_resamples`: the same episodes, one shared draw of seeds). Two methods
+    whose difference the seeds cannot resolve share a rank. Ranks are not always
+    consecutive: with A ahead of B beyond doubt and C level with both, the ranks are 1, 2, 1.
 
     Args:
         scores: suite scores covering the same tasks with the same seeds (every method of a
@@ -224,31 +257,66 @@ def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RES
     """
     if not scores:
         return []
-    tasks = list(scores[0].tasks)
-    rng = np.random.default_rng(seed)
-    resampled = np.zeros((len(scores), n_resamples))
-    for task in tasks:
-        aligned = []
-        for score in scores:
-            t = score.tasks.get(task)
-            if t is None or t.seeds is None:
-                raise ValueError(f"every score must cover {task} with its seeds to be paired")
-            order = np.argsort(t.seeds, kind="stable")
-            if aligned and not np.array_equal(t.seeds[order], aligned[0][0]):
-                raise ValueError(f"{task}: the scores ran different seeds; only the same episodes pair")
-            aligned.append((t.seeds[order], t.gains[order]))
-        picks = rng.integers(0, aligned[0][0].size, size=(n_resamples, aligned[0][0].size))
-        for i, (_, gains) in enumerate(aligned):
-            resampled[i] += gains[picks].mean(axis=1)
-    if any(set(score.tasks) != set(tasks) for score in scores):
-        raise ValueError("the scores cover different tasks; only the same episodes pair")
-    resampled /= len(tasks)  # each row: resampled S of one method
+    per_task = _paired_resamples(scores, n_resamples, seed)
+    resampled = sum(per_task.values()) / len(per_task)  # (methods, n_resamples): resampled S of each
     tail = 100.0 * (1.0 - confidence) / 2.0
     ranks = []
     for i in range(len(scores)):
         low = np.percentile(resampled - resampled[i], tail, axis=1)  # (methods,): the lower CI end of each lead
         ranks.append(1 + int(np.sum(low > 0.0)))
     return ranks
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """``B − A`` in gain, episode by episode, with its paired 95 % CI.
+
+    Attributes:
+        mean: the difference of the means (of S over the tasks, or of ``G_t`` on one task).
+        ci_low, ci_high: the paired stratified-bootstrap CI.
+        ahead: episodes (one task) or tasks (the suite) where B's mean gain is the higher.
+        count: episodes (one task) or tasks (the suite) compared.
+    """
+
+    mean: float
+    ci_low: float
+    ci_high: float
+    ahead: int
+    count: int
+
+
+def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_RESAMPLES,
+                      seed: int = DEFAULT_SEED, confidence: float = 0.95
+                      ) -> tuple[PairedDifference, dict[str, PairedDifference]]:
+    """How much B gains over A: ``S_B − S_A`` and, per task, ``G_B − G_A``, with paired CIs.
+
+    The CIs come from the same paired bootstrap that ranks the leaderboard
+    (:func:`separable_ranks`): B is ahead of A beyond doubt exactly when the suite CI is above 0.
+
+    Args:
+        a, b: suite scores of the same tasks and seeds.
+        n_resamples, seed: of the bootstrap.
+        confidence: of the CIs, in (0, 1).
+
+    Returns:
+        ``(suite difference, task → difference)``.
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    per_task = _paired_resamples([a, b], n_resamples, seed)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    tasks = {}
+    for task, resampled in per_task.items():
+        gains = _paired_gains([a, b], task)
+        low, high = np.percentile(resampled[1] - resampled[0], [tail, 100.0 - tail])
+        tasks[task] = PairedDifference(float(np.mean(gains[1] - gains[0])), float(low), float(high),
+                                       int(np.sum(gains[1] > gains[0])), int(gains.shape[1]))
+    suite = sum(per_task.values()) / len(per_task)
+    low, high = np.percentile(suite[1] - suite[0], [tail, 100.0 - tail])
+    means = [d.mean for d in tasks.values()]
+    return (PairedDifference(float(np.mean(means)), float(low), float(high), sum(m > 0 for m in means), len(means)),
+            tasks)
 
 
 def performance_profile(gains_by_task: Mapping[str, np.ndarray], taus: Sequence[float]) -> np.ndarray:
