@@ -76,8 +76,11 @@ def test_only_common_covered_episodes_are_compared_and_the_rest_is_listed():
     c = compare(a, b)
     assert [t.task for t in c.tasks] == ["swarmloc/X-v1"]
     assert c.tasks[0].difference.count == 2  # seeds 0 and 1: the ones both files hold
-    assert dict(c.left_out) == {"swarmloc/Y-v1": "not covered by b (null RMSE)", "swarmloc/Z-v1": "only in a's file",
-                                "swarmloc/W-v1": "only in b's file"}
+    assert dict(c.left_out) == {"swarmloc/Y-v1": "not covered by B (null RMSE)", "swarmloc/Z-v1": "only in A",
+                                "swarmloc/W-v1": "only in B"}
+    old = _results("b", {"X-v1": [0.5, 0.5]}, uniform=None)  # written before schema 2: no uniform_rmse
+    with pytest.raises(ValueError, match="not covered by B \\(no uniform_rmse: a results file older than schema 2"):
+        compare(a, old)
     apart = _results("b", {"X-v1": [0.5]}, seeds=[9])
     with pytest.raises(ValueError, match="share no covered task.*no seed in common"):
         compare(a, apart)
@@ -99,7 +102,7 @@ def test_the_command_prints_the_verdict_and_writes_the_json(tmp_path):
     console = Console(record=True, width=300)
     assert cli.run(cli.Options(a=pa, b=pb, json=out), console) == 0
     text = console.export_text()
-    assert "verdict: B is ahead beyond doubt" in text and "left out: swarmloc/Q-v1 (only in b's file)" in text
+    assert "verdict: B is ahead beyond doubt" in text and "left out: swarmloc/Q-v1 (only in B)" in text
     data = json.loads(out.read_text())
     assert data["difference"]["mean"] == pytest.approx(1.0) and data["b_ahead"] is True
     assert data["tasks"][0]["rmse_b"] == pytest.approx(0.75)

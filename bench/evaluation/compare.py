@@ -94,8 +94,13 @@ def _episodes_by_task(results: Results) -> dict[str, dict[int, tuple[float | Non
     return out
 
 
-def _covered(rows: dict[int, tuple[float | None, dict]], seeds: Sequence[int]) -> bool:
-    return all(rows[s][0] is not None and rows[s][1]["metrics"].get("uniform_rmse") is not None for s in seeds)
+def _not_covered(rows: dict[int, tuple[float | None, dict]], seeds: Sequence[int]) -> str | None:
+    """Why a method has no task score on these seeds (None when it has one)."""
+    if any(rows[s][0] is None for s in seeds):
+        return "null RMSE"
+    if any(rows[s][1]["metrics"].get("uniform_rmse") is None for s in seeds):
+        return "no uniform_rmse: a results file older than schema 2"
+    return None
 
 
 def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> Comparison:
@@ -120,15 +125,15 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
     kept_a, kept_b, names = [], [], []
     for task in list(rows_a) + [t for t in rows_b if t not in rows_a]:
         if task not in rows_a or task not in rows_b:
-            left_out.append((task, f"only in {a.method.name if task in rows_a else b.method.name}'s file"))
+            left_out.append((task, f"only in {'A' if task in rows_a else 'B'}"))
             continue
         seeds = sorted(set(rows_a[task]) & set(rows_b[task]))
         if not seeds:
             left_out.append((task, "no seed in common"))
             continue
-        uncovered = [r.method.name for r, rows in ((a, rows_a), (b, rows_b)) if not _covered(rows[task], seeds)]
-        if uncovered:
-            left_out.append((task, f"not covered by {' and '.join(uncovered)} (null RMSE)"))
+        why = [(label, _not_covered(rows[task], seeds)) for label, rows in (("A", rows_a), ("B", rows_b))]
+        if any(w for _, w in why):
+            left_out.append((task, "not covered by " + " and ".join(f"{label} ({w})" for label, w in why if w)))
             continue
         names.append(task)
         kept_a += [rows_a[task][s][1] for s in seeds]
