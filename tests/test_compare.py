@@ -86,6 +86,11 @@ def test_only_common_covered_episodes_are_compared_and_the_rest_is_listed():
         compare(a, apart)
 
 
+def test_episodes_whose_uniform_differs_are_not_the_same_world():
+    with pytest.raises(ValueError, match="X-v1 seed 0: uniform's RMSE is 1.0 in A and 1.5 in B"):
+        compare(_results("a", {"X-v1": [1.0]}), _results("b", {"X-v1": [0.5]}, uniform=1.5))
+
+
 def test_results_of_different_suites_do_not_compare_a_part_of_one_does():
     other = SuiteInfo(name="other", version="1", sha256="1" * 64)
     with pytest.raises(ValueError, match="different suites \\('tiny' and 'other'\\)"):

@@ -19,6 +19,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from swarmloc.bench.evaluation.results import Results
@@ -103,6 +105,15 @@ def _not_covered(rows: dict[int, tuple[float | None, dict]], seeds: Sequence[int
     return None
 
 
+def _check_same_world(task: str, seeds: Sequence[int], rows_a: dict, rows_b: dict) -> None:
+    """Both files' uniform RMSE agree on every seed: the same episode, so uniform cancels in B − A."""
+    for s in seeds:
+        ua, ub = (rows[s][1]["metrics"]["uniform_rmse"] for rows in (rows_a, rows_b))
+        if not math.isclose(ua, ub, rel_tol=1e-9):
+            raise ValueError(f"{task} seed {s}: uniform's RMSE is {ua!r} in A and {ub!r} in B, so the two files did "
+                             "not run the same episode (a task or filter changed between them)")
+
+
 def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> Comparison:
     """Compare results B against results A, paired on the episodes both hold.
 
@@ -115,7 +126,8 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
         The comparison; ``left_out`` names every task of either file that was not compared.
 
     Raises:
-        ValueError: the files ran different suites, or share no task both methods cover.
+        ValueError: the files ran different suites or different episodes under one (task, seed)
+            (their uniform RMSE differ), or share no task both methods cover.
     """
     if _base_suite(a.suite.name) != _base_suite(b.suite.name):
         raise ValueError(f"the results ran different suites ({a.suite.name!r} and {b.suite.name!r}); "
@@ -135,6 +147,7 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
         if any(w for _, w in why):
             left_out.append((task, "not covered by " + " and ".join(f"{label} ({w})" for label, w in why if w)))
             continue
+        _check_same_world(task, seeds, rows_a[task], rows_b[task])
         names.append(task)
         kept_a += [rows_a[task][s][1] for s in seeds]
         kept_b += [rows_b[task][s][1] for s in seeds]
