@@ -28,6 +28,10 @@ class Options:
     """Also write the comparison as JSON to this file."""
 
 
+#: columns of piped output: the widest task ID and the four number columns
+PIPED_WIDTH = 100
+
+
 def _signed(x: float) -> str:
     return f"{x:+.3f}"
 
@@ -70,10 +74,9 @@ def run(opts: Options, console: Console | None = None) -> int:
     from swarmloc.bench.common.files import write_text_atomic
     from swarmloc.bench.evaluation.compare import compare, comparison_dict
     from swarmloc.bench.evaluation.results import load_results
-    from swarmloc.leaderboard.views import TERMINAL_WIDTH
 
-    # piped output has no terminal width to fit: lay the table out for the leaderboard's 100 columns
-    console = console or (Console() if sys.stdout.isatty() else Console(width=TERMINAL_WIDTH))
+    # piped output has no terminal width to fit: lay the table out for the width it needs
+    console = console or (Console() if sys.stdout.isatty() else Console(width=PIPED_WIDTH))
     if opts.resamples < 1:
         console.print(Text(f"error: --resamples must be >= 1, got {opts.resamples}", style="bold red"))
         return 2
