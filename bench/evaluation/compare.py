@@ -89,18 +89,19 @@ def _base_suite(name: str) -> str:
     return name.removesuffix("-subset")
 
 
-def _episodes_by_task(results: Results) -> dict[str, dict[int, tuple[float | None, dict]]]:
-    out: dict[str, dict[int, tuple[float | None, dict]]] = {}
+def _episodes_by_task(results: Results) -> dict[str, dict[int, dict]]:
+    """task → seed → the episode as plain data (``{"task", "seed", "metrics"}``)."""
+    out: dict[str, dict[int, dict]] = {}
     for e in results.episodes:
-        out.setdefault(e.task, {})[e.seed] = (e.metrics.rmse, e.model_dump())
+        out.setdefault(e.task, {})[e.seed] = e.model_dump()
     return out
 
 
-def _not_covered(rows: dict[int, tuple[float | None, dict]], seeds: Sequence[int]) -> str | None:
+def _not_covered(rows: dict[int, dict], seeds: Sequence[int]) -> str | None:
     """Why a method has no task score on these seeds (None when it has one)."""
-    if any(rows[s][0] is None for s in seeds):
+    if any(rows[s]["metrics"]["rmse"] is None for s in seeds):
         return "null RMSE"
-    if any(rows[s][1]["metrics"].get("uniform_rmse") is None for s in seeds):
+    if any(rows[s]["metrics"]["uniform_rmse"] is None for s in seeds):
         return "no uniform_rmse: a results file older than schema 2"
     return None
 
@@ -108,7 +109,7 @@ def _not_covered(rows: dict[int, tuple[float | None, dict]], seeds: Sequence[int
 def _check_same_world(task: str, seeds: Sequence[int], rows_a: dict, rows_b: dict) -> None:
     """Both files' uniform RMSE agree on every seed: the same episode, so uniform cancels in B − A."""
     for s in seeds:
-        ua, ub = (rows[s][1]["metrics"]["uniform_rmse"] for rows in (rows_a, rows_b))
+        ua, ub = (rows[s]["metrics"]["uniform_rmse"] for rows in (rows_a, rows_b))
         if not math.isclose(ua, ub, rel_tol=1e-9):
             raise ValueError(f"{task} seed {s}: uniform's RMSE is {ua!r} in A and {ub!r} in B, so the two files did "
                              "not run the same episode (a task or filter changed between them)")
@@ -134,7 +135,7 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
                          "only the same episodes compare")
     rows_a, rows_b = _episodes_by_task(a), _episodes_by_task(b)
     left_out: list[tuple[str, str]] = []
-    kept_a, kept_b, names = [], [], []
+    kept_a, kept_b, seeds_of = [], [], {}
     for task in list(rows_a) + [t for t in rows_b if t not in rows_a]:
         if task not in rows_a or task not in rows_b:
             left_out.append((task, f"only in {'A' if task in rows_a else 'B'}"))
@@ -148,20 +149,21 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
             left_out.append((task, "not covered by " + " and ".join(f"{label} ({w})" for label, w in why if w)))
             continue
         _check_same_world(task, seeds, rows_a[task], rows_b[task])
-        names.append(task)
-        kept_a += [rows_a[task][s][1] for s in seeds]
-        kept_b += [rows_b[task][s][1] for s in seeds]
+        seeds_of[task] = seeds
+        kept_a += [rows_a[task][s] for s in seeds]
+        kept_b += [rows_b[task][s] for s in seeds]
+    names = list(seeds_of)
     if not names:
         raise ValueError(f"{a.method.name!r} and {b.method.name!r} share no covered task; left out: {left_out}")
     score_a, score_b = suite_score(kept_a, names), suite_score(kept_b, names)
     assert score_a is not None and score_b is not None  # every kept task is covered by both
     suite_diff, task_diffs = paired_difference(score_a, score_b, n_resamples, seed)
     tasks = []
-    for task in names:
-        ta, tb = score_a.tasks[task], score_b.tasks[task]
-        rmse = {r: float(np.mean([rows[task][int(s)][0] for s in ts.seeds]))
-                for r, rows, ts in (("a", rows_a, ta), ("b", rows_b, tb))}
-        tasks.append(TaskComparison(task, rmse["a"], rmse["b"], ta.mean, tb.mean, task_diffs[task]))
+    for task, seeds in seeds_of.items():
+        rmse_a, rmse_b = (float(np.mean([rows[task][s]["metrics"]["rmse"] for s in seeds]))
+                          for rows in (rows_a, rows_b))
+        tasks.append(TaskComparison(task, rmse_a, rmse_b, score_a.tasks[task].mean, score_b.tasks[task].mean,
+                                    task_diffs[task]))
     p = probability_of_improvement({t: s.gains for t, s in score_b.tasks.items()},
                                    {t: s.gains for t, s in score_a.tasks.items()})
     return Comparison(a.method.name, b.method.name, a.suite.name, score_a, score_b, suite_diff, p, tuple(tasks),

@@ -217,8 +217,11 @@ def _paired_gains(scores: Sequence[SuiteScore], task: str) -> np.ndarray:
     return np.stack(rows)
 
 
-def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int, seed: int) -> dict[str, np.ndarray]:
-    """Per task, ``(methods, n_resamples)`` resampled task means, one draw of seeds shared by every method.
+def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
+                      seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per task, the ``(methods, n)`` paired gains and ``(methods, n_resamples)`` resampled task means.
+
+    One draw of seeds per resample is shared by every method.
 
     The stratified bootstrap of :func:`bootstrap_suite_ci`, paired: each resample draws a
     task's seeds once and applies that draw to every method, so two methods are compared
@@ -233,7 +236,7 @@ def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int, seed: int)
     for task in tasks:
         gains = _paired_gains(scores, task)
         picks = rng.integers(0, gains.shape[1], size=(n_resamples, gains.shape[1]))
-        out[task] = gains[:, picks].mean(axis=2)
+        out[task] = gains, gains[:, picks].mean(axis=2)
     return out
 
 
@@ -258,7 +261,7 @@ def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RES
     if not scores:
         return []
     per_task = _paired_resamples(scores, n_resamples, seed)
-    resampled = sum(per_task.values()) / len(per_task)  # (methods, n_resamples): resampled S of each
+    resampled = sum(r for _, r in per_task.values()) / len(per_task)  # (methods, n_resamples): resampled S of each
     tail = 100.0 * (1.0 - confidence) / 2.0
     ranks = []
     for i in range(len(scores)):
@@ -307,12 +310,11 @@ def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_R
     per_task = _paired_resamples([a, b], n_resamples, seed)
     tail = 100.0 * (1.0 - confidence) / 2.0
     tasks = {}
-    for task, resampled in per_task.items():
-        gains = _paired_gains([a, b], task)
+    for task, (gains, resampled) in per_task.items():
         low, high = np.percentile(resampled[1] - resampled[0], [tail, 100.0 - tail])
         tasks[task] = PairedDifference(float(np.mean(gains[1] - gains[0])), float(low), float(high),
                                        int(np.sum(gains[1] > gains[0])), int(gains.shape[1]))
-    suite = sum(per_task.values()) / len(per_task)
+    suite = sum(r for _, r in per_task.values()) / len(per_task)
     low, high = np.percentile(suite[1] - suite[0], [tail, 100.0 - tail])
     means = [d.mean for d in tasks.values()]
     return (PairedDifference(float(np.mean(means)), float(low), float(high), sum(m > 0 for m in means), len(means)),
