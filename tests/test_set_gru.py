@@ -175,6 +175,21 @@ def test_training_is_deterministic_given_a_seed(tmp_path):
     assert any(not torch.equal(a[k], c[k]) for k in a)
 
 
+def test_training_gives_the_same_weights_on_one_or_two_threads(tmp_path):
+    """``--threads 2`` (the update's matrix products on both cores) changes no number: the shipped widths (E = H = 64),
+    so that the products are large enough to be split between threads."""
+    from swarmloc.agents.mappo_config import SetGruConfig
+    from swarmloc.agents.mappo_set_gru import train
+
+    def cfg(threads: int) -> SetGruConfig:
+        return SetGruConfig(tasks=("ScaleRandom-v1",), frames=800, num_envs=4, rollout_steps=100, epochs=1,
+                            minibatches=2, threads=threads, seed=3, run_dir=str(tmp_path / str(threads)),
+                            progress=False, eval_every=0, checkpoint_every=0)
+
+    one, two = (train(cfg(n)).actor_state for n in (1, 2))
+    assert all(torch.equal(one[k], two[k]) for k in one)
+
+
 def test_training_batches_carry_the_pending_fault_labels_of_what_the_policy_saw():
     """The auxiliary loss's labels: on NLOSStep-v1 (anchors 0, 2, 4 biased from 20 s, ramping over 5 s) no anchor
     channel is labelled before the window and, inside it, only those anchors' are. (Labels v1 of Track A also
