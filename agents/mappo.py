@@ -243,6 +243,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
         frames += batch.numel()
         if cfg.anneal_lr:
             optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
+        label_weight = cfg.label_weight(it, n_iters)
 
         returns = log_rollout(writer, batch, running[t], task, frames)
         t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
@@ -261,7 +262,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                     # privileged auxiliary loss (``label_coef``): logit → "healthy", present channels only
                     obs = mb[G, "observation"]
                     loss_label = label_loss(actor_net(obs), mb[G, "fault_label"], obs[..., VALID])
-                    total = total + cfg.label_coef * loss_label
+                    total = total + label_weight * loss_label
                     stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
                 total.backward()

@@ -103,6 +103,10 @@ class MappoConfig:
     """weight of a privileged auxiliary loss: the actor's logit is also fitted (binary cross-entropy) to
     "healthy" = not fault-labelled (labels v1 of the collected measurements; training only, as the
     privileged critic's position error; needs collectors=0). 0: the paper's MAPPO"""
+    label_coef_final: float | None = None
+    """the label loss weight at the end of the run, reached linearly from ``label_coef`` (a warm start that
+    hands the trust over to the reward: unlabelled links that still cost accuracy can then be down-weighted);
+    None: ``label_coef`` throughout"""
     reward_weights: dict = field(default_factory=dict)
     """extra ``RewardWeights`` overrides (advanced; ``accuracy_only`` sets delay/energy/jitter to 0)"""
 
@@ -119,6 +123,9 @@ class MappoConfig:
         if self.label_coef < 0 or (self.label_coef > 0 and self.collectors):
             raise ValueError(f"label_coef={self.label_coef} must be >= 0, and 0 with collectors >= 1 (the labels are "
                              "read from the env in this process)")
+        if self.label_coef_final is not None and not (0 <= self.label_coef_final and self.label_coef > 0):
+            raise ValueError(f"label_coef_final={self.label_coef_final} must be >= 0, and needs label_coef > 0 "
+                             f"(got label_coef={self.label_coef})")
         if self.address is not None and (self.backend != "ray" or not self.collectors):
             raise ValueError(f"address={self.address!r} names a Ray cluster; it needs collectors >= 1 and backend ray")
         if not 0 <= self.seed < TRAINING_SEED_LIMIT:
@@ -139,6 +146,13 @@ class MappoConfig:
     def frames_per_batch(self) -> int:
         """Frames per collector batch (B · rollout_steps)."""
         return self.num_envs * self.rollout_steps
+
+    def label_weight(self, iteration: int, n_iterations: int) -> float:
+        """The label loss weight at ``iteration`` of ``n_iterations`` (linear from ``label_coef`` to
+        ``label_coef_final``, as the learning rate anneals)."""
+        if self.label_coef_final is None:
+            return self.label_coef
+        return self.label_coef + (self.label_coef_final - self.label_coef) * iteration / n_iterations
 
     def weights(self) -> RewardWeights:
         """The reward weights of this run (standard v0 unless ``accuracy_only`` / overrides)."""

@@ -174,6 +174,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
         frames += batch.numel()
         if cfg.anneal_lr:
             optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
+        label_weight = cfg.label_weight(it, n_iters)
 
         returns = log_rollout(writer, batch, running[t], task, frames)
         t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
@@ -204,7 +205,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                 if labels is not None:
                     # privileged auxiliary loss: logit → "healthy" (not fault-labelled), present channels only
                     loss_label = label_loss(loc, mb[G, "fault_label"], valid)
-                    total = total + cfg.label_coef * loss_label
+                    total = total + label_weight * loss_label
                     stats.setdefault("label_bce", []).append(float(loss_label.detach()))
                 optimizer.zero_grad()
                 total.backward()
