@@ -137,6 +137,21 @@ def test_config_refuses_what_recurrent_training_cannot_do(tmp_path):
         SetGruConfig(num_envs=4, minibatches=2, collectors=2, run_dir=str(tmp_path))
 
 
+def test_label_loss_weight_anneals_linearly_to_its_final_value(tmp_path):
+    """``label_coef_final``: the weight goes linearly from ``label_coef`` at the first iteration to the final value
+    at the end (as the learning rate anneals); without it the weight stays ``label_coef``."""
+    from swarmloc.agents.mappo_config import MappoConfig, SetGruConfig
+
+    cfg = SetGruConfig(label_coef=1.0, label_coef_final=0.0, run_dir=str(tmp_path))
+    assert [cfg.label_weight(it, 8) for it in (0, 2, 4, 6)] == [1.0, 0.75, 0.5, 0.25]
+    assert SetGruConfig(label_coef=2.0, label_coef_final=1.0, run_dir=str(tmp_path)).label_weight(5, 10) == 1.5
+    assert SetGruConfig(label_coef=0.7, run_dir=str(tmp_path)).label_weight(9, 10) == 0.7
+    with pytest.raises(ValueError, match=r"label_coef_final=-0.5 must be >= 0"):
+        SetGruConfig(label_coef_final=-0.5, run_dir=str(tmp_path))
+    with pytest.raises(ValueError, match=r"needs label_coef > 0 \(got label_coef=0.0\)"):
+        MappoConfig(label_coef=0.0, label_coef_final=0.5, run_dir=str(tmp_path))
+
+
 def test_train_cli_smoke_replays_the_collected_log_probabilities(tmp_path):
     """``swarmloc train mappo-set-gru`` on a few hundred frames: weights, provenance, logs; the first epoch's
     replay from the batch's start state gives back the collected log-probabilities (ratio 1)."""
