@@ -1,5 +1,5 @@
-"""The committed standard-v1 and standard-v0 results of the shipped methods match their suites and load into a fresh
-store."""
+"""The committed standard-v1 and standard-v0 results of the shipped methods match their suites, load into a fresh
+store, and (the learned ones) come from the shipped weights."""
 
 from __future__ import annotations
 
@@ -86,3 +86,16 @@ def test_a_shipped_method_whose_results_changed_replaces_its_stale_entry(tmp_pat
         with pytest.raises(DuplicateSubmission):
             store.add(new, replace_reference=True)
         assert [e.task_aggregates for e in store.entries()] == [old.task_aggregates]
+
+
+@pytest.mark.parametrize("method", ["mappo-set-gru", "mappo"])
+def test_shipped_learned_results_come_from_the_shipped_weights(method):
+    """Re-running one shipped standard-v1 episode of a learned method gives the file's numbers: the weights
+    in agents/weights and the results beside them were not swapped one without the other."""
+    from swarmloc.bench.evaluation.runner import run_episodes
+
+    results = load_results(RESULTS_DIRS["standard-v1"] / f"{method}.json")
+    shipped = next(e for e in results.episodes if e.task == "swarmloc/Scale2-v1")
+    rerun = run_episodes(method, [(shipped.task, shipped.seed)])[0]["metrics"]
+    for key in ("rmse", "max_error", "jitter"):
+        assert rerun[key] == pytest.approx(getattr(shipped.metrics, key), rel=1e-6), key
