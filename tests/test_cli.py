@@ -56,6 +56,20 @@ def test_evaluate_refuses_bad_suite_and_task(tmp_path, capsys):
     assert "choose from" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, named", [
+    (["reproduce", "peer-update", "--tasks", "swarmloc/Nope-v9"], "unknown task ID 'swarmloc/Nope-v9'"),
+    (["reproduce", "calibration", "--suite", "nope"], "unknown suite 'nope'"),
+    (["reproduce", "immarkf", "--seeds", "0"], "got 0"),
+])
+def test_reproduce_refuses_bad_options_and_writes_nothing(argv, named, tmp_path, capsys):
+    outs = ["--out-md", str(tmp_path / "c.md"), "--out-json", str(tmp_path / "c.json")] \
+        if "calibration" in argv else ["--out", str(tmp_path / "r.md")]
+    assert cli.main(argv + outs) == 2
+    printed = capsys.readouterr().out
+    assert printed.startswith("error: ") and named in printed
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_tasks_and_methods_commands(capsys):
     assert cli.main(["tasks"]) == 0
     assert "swarmloc/CascadedFault-v0" in capsys.readouterr().out

@@ -25,6 +25,7 @@ from __future__ import annotations
 import importlib
 import sys
 from importlib import metadata
+from pathlib import Path
 from types import ModuleType
 from typing import Annotated, Any, Callable, Union
 
@@ -82,6 +83,25 @@ GROUP_HELP = {
 }
 
 ENTRY_POINT_GROUP = "swarmloc.commands"
+
+
+def print_report(write: Callable[[], Path]) -> int:
+    """Run a ``reproduce`` command: write its report, then print it.
+
+    Args:
+        write: writes the report and returns its path.
+
+    Returns:
+        0, or 2 after printing ``error: …`` when an option names something that does not
+        exist or is not allowed (``ValueError``, ``KeyError``, ``FileNotFoundError``).
+    """
+    try:
+        path = write()
+    except (ValueError, KeyError, FileNotFoundError) as err:
+        print(f"error: {err.args[0] if isinstance(err, KeyError) and err.args else err}")
+        return 2
+    print(path.read_text(encoding="utf-8"))
+    return 0
 
 
 def load_command(module_path: str) -> ModuleType:

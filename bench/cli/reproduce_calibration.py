@@ -6,6 +6,8 @@ import shlex
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -42,11 +44,9 @@ def run(opts: Options) -> int:
     """Write the report and its JSON; print the report."""
     from swarmloc.bench.reproduce.calibration import reproduce_calibration
 
-    try:
+    def write() -> Path:
         reproduce_calibration(opts.suite, opts.tasks, opts.seeds, opts.out_md, opts.out_json, workers=opts.workers,
                               progress=opts.progress, command=command_line(opts))
-    except (KeyError, ValueError) as err:
-        print(f"error: {err.args[0] if err.args else err}")
-        return 2
-    print(opts.out_md.read_text(encoding="utf-8"))
-    return 0
+        return opts.out_md
+
+    return print_report(write)

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -22,10 +24,4 @@ def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.dtvirm import reproduce_dtvirm
 
-    try:
-        path = reproduce_dtvirm(opts.out, opts.seeds, opts.trials)
-    except ValueError as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_dtvirm(opts.out, opts.seeds, opts.trials))

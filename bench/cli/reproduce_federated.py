@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -22,10 +24,4 @@ def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.federated import reproduce_federated
 
-    try:
-        path = reproduce_federated(opts.out, opts.seeds, opts.version)
-    except ValueError as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_federated(opts.out, opts.seeds, opts.version))

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -24,10 +26,4 @@ def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.immarkf import reproduce_immarkf
 
-    try:
-        path = reproduce_immarkf(opts.out, opts.seeds, opts.duration, opts.version)
-    except ValueError as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_immarkf(opts.out, opts.seeds, opts.duration, opts.version))

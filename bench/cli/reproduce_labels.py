@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -25,10 +27,5 @@ def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.labels import reproduce_labels
 
-    try:
-        path = reproduce_labels(opts.out, workers=opts.workers, seeds=opts.seeds, progress=opts.progress)
-    except ValueError as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_labels(opts.out, workers=opts.workers, seeds=opts.seeds,
+                                                 progress=opts.progress))

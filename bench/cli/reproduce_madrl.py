@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -28,11 +30,5 @@ def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.madrl import reproduce_madrl
 
-    try:
-        path = reproduce_madrl(opts.out, opts.seeds, opts.traces, opts.weights, opts.accuracy_only_weights,
-                               version=opts.version)
-    except (ValueError, FileNotFoundError) as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_madrl(opts.out, opts.seeds, opts.traces, opts.weights,
+                                                opts.accuracy_only_weights, version=opts.version))

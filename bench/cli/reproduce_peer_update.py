@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -25,12 +27,5 @@ class Options:
 def run(opts: Options) -> int:
     """Write the report and print it."""
     from swarmloc.bench.reproduce.peer_update import reproduce_peer_update
-    from swarmloc.envs.tasks import UnknownTaskError
 
-    try:
-        path = reproduce_peer_update(opts.out, opts.seeds, opts.tasks or None, variants=opts.variants)
-    except (ValueError, UnknownTaskError) as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_peer_update(opts.out, opts.seeds, opts.tasks or None, variants=opts.variants))

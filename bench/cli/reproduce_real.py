@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.bench.cli import print_report
+
 
 @dataclass
 class Options:
@@ -24,10 +26,5 @@ def run(opts: Options) -> int:
     """Write the report and print it; without the data, say where it comes from (exit status 2)."""
     from swarmloc.bench.reproduce.real import reproduce_real
 
-    try:
-        path = reproduce_real(opts.out, list(opts.methods) or None, workers=opts.workers, seeds=opts.seeds)
-    except (FileNotFoundError, ValueError) as err:
-        print(f"error: {err}")
-        return 2
-    print(path.read_text())
-    return 0
+    return print_report(lambda: reproduce_real(opts.out, list(opts.methods) or None, workers=opts.workers,
+                                               seeds=opts.seeds))
