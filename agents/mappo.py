@@ -190,7 +190,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
 
     # ---- determinism and threads
     torch.manual_seed(cfg.seed)
-    torch.set_num_threads(cfg.threads)
+    torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
     numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

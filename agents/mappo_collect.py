@@ -72,7 +72,7 @@ class TaskPlan:
         n_steps: episode length, in steps.
         rollout_steps: steps per batch (divides ``n_steps``).
         offset: this worker's first episode among the B (0 in this process).
-        threads: torch and numba threads of a worker.
+        threads: numba threads of a worker (torch runs on one thread).
     """
 
     run_seed: int
@@ -141,7 +141,7 @@ class AlignedCollector(Collector):
 
     Takes ``plans`` (one :class:`TaskPlan` per worker of the task) and picks its own by
     ``worker_idx``, which both ``MultiSyncCollector`` and ``RayCollector`` pass; seeds its
-    worker's torch generator (the exploration noise) and sets its torch and numba threads.
+    worker's torch generator (the exploration noise), runs torch on one thread and numba on ``plan.threads``.
     """
 
     def __init__(self, *args: Any, plans: Sequence[TaskPlan] = (), worker_idx: int | None = None,
@@ -149,7 +149,7 @@ class AlignedCollector(Collector):
         super().__init__(*args, worker_idx=worker_idx, **kwargs)
         j = worker_idx or 0
         plan = plans[j]
-        torch.set_num_threads(plan.threads)
+        torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
         numba.set_num_threads(min(plan.threads, numba.config.NUMBA_NUM_THREADS))
         torch.manual_seed(worker_torch_seed(plan.run_seed, plan.task_index, j))
         self.schedule = BatchSchedule(plan)
@@ -178,7 +178,7 @@ class Collection:
         backend: ``process`` or ``ray`` (N ≥ 1).
         address: Ray cluster to join (``ray``; default ``$RAY_ADDRESS``, else a local one).
         check_seeds: the episode-seed guard.
-        threads: torch and numba threads of each worker.
+        threads: numba threads of each worker (torch runs on one thread).
     """
 
     def __init__(self, tasks: Sequence[str], num_envs: int, rollout_steps: int, run_seed: int, policy: Any,

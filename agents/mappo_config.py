@@ -85,8 +85,11 @@ class MappoConfig:
     run_dir: str = "runs/mappo"
     """TensorBoard logs and checkpoints go here"""
     threads: int = 1
-    """torch and numba threads (1: polite on a shared machine; 2 gives mappo-set-gru the same weights about 1.3x
-    faster on this 2-core machine, docs/learned.md)"""
+    """numba threads of the world's kernels (1: polite on a shared machine). torch always runs on one thread:
+    a threaded BLAS (MKL on AVX-512 Intel CPUs) sums a matrix product in an order that depends on the thread
+    count, so a threaded update would give other weights for another ``threads``. With torch on one thread,
+    the same seed gives the same weights bit for bit for any ``threads``, collector count held fixed, on one
+    machine; across CPUs, BLAS picks its kernels by instruction set and the last bits may differ."""
     collectors: int = 0
     """collector workers per task (0: collect in this process; N: N synchronized workers per task, each
     stepping num_envs / N of its episodes, weights sent before every batch; same seed → same weights for a

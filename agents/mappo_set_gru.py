@@ -121,7 +121,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
 
     # ---- determinism and threads
     torch.manual_seed(cfg.seed)
-    torch.set_num_threads(cfg.threads)
+    torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
     # backpropagating through T GRU steps from a near-zero last layer makes denormal floats,
     # 50-70x slower on CPU; flushed to 0 they change nothing measurable
     torch.set_flush_denormal(True)

@@ -191,8 +191,9 @@ def test_training_is_deterministic_given_a_seed(tmp_path):
 
 
 def test_training_gives_the_same_weights_on_one_or_two_threads(tmp_path):
-    """``--threads 2`` (the update's matrix products on both cores) changes no number: the shipped widths (E = H = 64),
-    so that the products are large enough to be split between threads."""
+    """``--threads 2`` (the world's kernels on both cores) changes no number, at the shipped widths (E = H = 64),
+    where a threaded BLAS would split the update's matrix products: torch stays on one thread, so this holds
+    on any x86-64 CPU (MKL on AVX-512 Xeons reduces in a thread-dependent order)."""
     from swarmloc.agents.mappo_config import SetGruConfig
     from swarmloc.agents.mappo_set_gru import train
 
@@ -201,7 +202,9 @@ def test_training_gives_the_same_weights_on_one_or_two_threads(tmp_path):
                             minibatches=2, threads=threads, seed=3, run_dir=str(tmp_path / str(threads)),
                             progress=False, eval_every=0, checkpoint_every=0)
 
+    torch.set_num_threads(2)  # what a caller may have set: training pins torch to one thread regardless
     one, two = (train(cfg(n)).actor_state for n in (1, 2))
+    assert torch.get_num_threads() == 1
     assert all(torch.equal(one[k], two[k]) for k in one)
 
 
