@@ -21,9 +21,9 @@ Probability = Annotated[float, Field(ge=0.0, le=1.0)]
 
 
 class Frozen(BaseModel):
-    """Base for every spec model: immutable, unknown keys rejected."""
+    """Base for every spec model: immutable, unknown keys and non-finite numbers (NaN, ±inf) rejected."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
 
 # --------------------------------------------------------------------------- truth

@@ -82,3 +82,32 @@ def test_per_episode_healthy_scoring_is_validated():
         get_spec("swarmloc/CascadedFault-v0", scoring={**healthy, "nodes": (1, 2)})
     with pytest.raises(ValidationError, match="nodes_from_schedule"):
         get_spec("swarmloc/CascadedFaultRandom-v0", scoring={"nodes_from_schedule": "faulty"})
+
+
+@pytest.mark.parametrize(("task", "changes", "field"), [
+    ("swarmloc/NLOS-v1", {"anchors": [[0.0, 0.0, float("nan")]]}, "anchors.0.2"),
+    ("swarmloc/VisionLoss-v1", {"landmarks": [[0.0, float("inf"), 1.0]]}, "landmarks.0.1"),
+    ("swarmloc/NLOS-v1", {"duration": float("nan")}, "duration"),
+    ("swarmloc/NLOS-v1", {"sensors": {"anchor_max_range": float("inf")}}, "sensors.anchor_max_range"),
+    ("swarmloc/NLOS-v1", {"trajectory": {"altitude": float("-inf")}}, "trajectory.accel_circle.altitude"),
+])
+def test_non_finite_numbers_are_refused_naming_the_field(task, changes, field):
+    """NaN and ±inf anywhere in a spec (points, vectors, ranges, durations) are refused with the field's path."""
+    import gymnasium as gym
+
+    import swarmloc.envs  # noqa: F401
+
+    with pytest.raises(ValidationError, match="finite number") as err:
+        get_spec(task, **changes)
+    assert field in str(err.value)
+    with pytest.raises(ValidationError, match="finite number"):
+        gym.make(task, **changes)
+
+
+def test_every_registered_spec_is_finite():
+    """The refusal changes no shipped task: every registered spec still validates."""
+    from swarmloc.envs.tasks import CATALOGUE
+
+    for task in CATALOGUE:
+        spec = get_spec(task)
+        assert TaskSpec.model_validate_json(spec.model_dump_json()) == spec
