@@ -32,7 +32,7 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
-	$(BIN)/python -m swarmloc.bench.speed
+	$(BIN)/swarmloc bench speed
 
 docs: $(STAMP)
 	$(BIN)/python -m swarmloc.envs.docgen docs/tasks

@@ -32,7 +32,7 @@ At execution the actor is deterministic and wrapped in adaptive Markov smoothing
 (madrl eq. 15–17), see ``mappo_policy.py``.
 
 Run: ``swarmloc train mappo --frames 1000000`` (``swarmloc.bench.training.mappo``: seed checks,
-dev-seed evaluation, provenance) or ``python -m swarmloc.agents.mappo --frames 1600``.
+dev-seed evaluation, provenance).
 """
 
 from __future__ import annotations
@@ -300,13 +300,3 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     return TrainResult(actor_state={k: v.detach().clone() for k, v in actor_net.state_dict().items()},
                        frames=frames, wall_time_s=time.time() - start, iterations=n_iters, episode_seeds=seeds,
                        last_eval=last_eval)
-
-
-if __name__ == "__main__":
-    import tyro
-
-    config = tyro.cli(MappoConfig)
-    result = train(config)
-    path = Path(config.run_dir) / "mappo.pt"
-    torch.save(result.actor_state, path)
-    print(f"trained {result.frames} frames in {result.wall_time_s:.0f} s → {path}")

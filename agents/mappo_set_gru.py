@@ -28,8 +28,7 @@ noise on the logit, the adaptive Markov smoothing in the loop and at execution,
 TensorBoard keys, seeds checked by the bench glue (``swarmloc train mappo-set-gru``).
 Collection runs in this process (the hidden state lives here).
 
-Run: ``swarmloc train mappo-set-gru --frames 3000000`` or
-``python -m swarmloc.agents.mappo_set_gru --frames 3200 --tasks CascadedFaultRandom-v1``.
+Run: ``swarmloc train mappo-set-gru --frames 3000000``.
 """
 
 from __future__ import annotations
@@ -249,13 +248,3 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
     return TrainResult(actor_state={k: v.detach().clone() for k, v in actor.state_dict().items()},
                        frames=frames, wall_time_s=time.time() - start, iterations=n_iters,
                        episode_seeds=collection.episode_seeds(), last_eval=last_eval)
-
-
-if __name__ == "__main__":
-    import tyro
-
-    config = tyro.cli(SetGruConfig)
-    result = train(config)
-    path = Path(config.run_dir) / "mappo_set_gru.pt"
-    torch.save(result.actor_state, path)
-    print(f"trained {result.frames} frames in {result.wall_time_s:.0f} s → {path}")

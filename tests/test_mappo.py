@@ -43,9 +43,9 @@ def _tiny_config(tmp_path: Path, **kw):
 
 
 def test_train_cli_smoke(tmp_path):
-    """``python -m swarmloc.bench.training.mappo`` trains a few hundred frames and writes weights, provenance and logs."""
+    """``swarmloc train mappo`` trains a few hundred frames and writes weights, provenance and logs."""
     out = tmp_path / "w" / "mappo.pt"
-    cmd = [sys.executable, "-m", "swarmloc.bench.training.mappo", "--frames", "400", "--tasks", "CascadedFault-v0",
+    cmd = [str(Path(sys.executable).parent / "swarmloc"), "train", "mappo", "--frames", "400", "--tasks", "CascadedFault-v0",
            "Scale2-v0", "--num-envs", "2", "--rollout-steps", "100", "--epochs", "1", "--minibatches", "2",
            "--eval-seeds", "1", "--run-dir", str(tmp_path / "run"), "--weights-out", str(out), "--no-progress"]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=240)

@@ -37,7 +37,7 @@ turning track, the mirror) by orthogonal Procrustes over the track; the mirror r
 above; translation by §3.3 (node 0's start is the origin; line 26 as printed adds ΔX_abs
 minus a relative displacement, which does not put node 1 there). Missing ranges (NaN)
 are filled by shortest paths over the measured graph, as MDS-MAP (Shang et al.) does;
-measured ranges are kept. ``python -m swarmloc.bench.reproduce.mdsmap_compare`` measures both.
+measured ranges are kept. ``swarmloc reproduce dtvirm`` measures both (its Table 1).
 
 Batch shapes: leading dims ``...`` (typically B envs), N UAVs, K moves, M = N + K points.
 """

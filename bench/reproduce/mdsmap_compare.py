@@ -15,12 +15,11 @@ Error = mean over nodes 1..N−1 of ‖x̂ − x‖ (node 0 is the origin by def
 mean over trials. Time = wall-clock per single-problem call (B = 1), as a per-swarm
 initializer runs; the batched MDS-MAP time per problem is reported too.
 
-Run: ``python -m swarmloc.bench.reproduce.mdsmap_compare [--trials 500 --seed 0 ...]``.
+Run by ``swarmloc reproduce dtvirm`` (its Table 1).
 """
 
 from __future__ import annotations
 
-import argparse
 import platform
 import time
 from collections.abc import Callable
@@ -215,26 +214,3 @@ def format_table(res: dict[str, Any]) -> str:
         f"{s['area_m']:g} m square, altitudes 0–{s['altitude_spread_m']:g} m, step {s['step_m']:g} m"
     )
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """Command line: run ``compare_mdsmap_nls`` and print the table."""
-    ap = argparse.ArgumentParser(
-        prog="python -m swarmloc.bench.reproduce.mdsmap_compare", description=(__doc__ or "").splitlines()[0]
-    )
-    ap.add_argument("--n-nodes", type=int, default=12)
-    ap.add_argument("--noise", type=float, default=0.5)
-    ap.add_argument("--trials", type=int, default=500)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--area", type=float, default=20.0)
-    ap.add_argument("--altitude-spread", type=float, default=2.0)
-    ap.add_argument("--step", type=float, default=5.0)
-    a = ap.parse_args(argv)
-    res = compare_mdsmap_nls(
-        a.n_nodes, a.noise, a.trials, a.seed, area=a.area, altitude_spread=a.altitude_spread, step=a.step
-    )
-    print(format_table(res))
-
-
-if __name__ == "__main__":
-    main()

@@ -256,22 +256,3 @@ def reproduce_pfnn(out: Path, seeds: int = 32, duration: float | None = None, ti
         "ordering": ordering(results), "table5": timing,
     }
     return write_report(out, text, raw, indent=2)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m swarmloc.bench.reproduce.pfnn OUT [--seeds N] [--duration S]``."""
-    import argparse
-
-    parser = argparse.ArgumentParser(description="pf-nn Tables 4 and 5 on Indoor-v0")
-    parser.add_argument("out", type=Path)
-    parser.add_argument("--seeds", type=int, default=32)
-    parser.add_argument("--duration", type=float, default=None)
-    parser.add_argument("--timing-steps", type=int, default=300)
-    parser.add_argument("--no-oracle", action="store_true")
-    args = parser.parse_args(argv)
-    path = reproduce_pfnn(args.out, args.seeds, args.duration, args.timing_steps, not args.no_oracle)
-    print(path.read_text())
-
-
-if __name__ == "__main__":
-    main()

@@ -162,14 +162,3 @@ def measure_env_rows(quick: bool = False) -> list[dict]:
     for n_b in BATCHES:
         rows.append(vmas_row(n_b, batched))
     return [row for row in rows if row is not None]
-
-
-if __name__ == "__main__":
-    import argparse
-
-    parser = argparse.ArgumentParser(description="swarmloc environment-API throughput")
-    parser.add_argument("--quick", action="store_true", help="fewer steps")
-    args = parser.parse_args()
-    print(f"{'impl':<20} {'B':>5} {'env-steps/s':>13} {'UAV-steps/s':>13}")
-    for row in measure_env_rows(args.quick):
-        print(f"{row['impl']:<20} {row['B']:>5} {row['env_steps_per_s']:>13,.0f} {row['uav_steps_per_s']:>13,.0f}")

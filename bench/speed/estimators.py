@@ -16,14 +16,11 @@ Each time is taken per step over ``steps`` consecutive filter steps (the estimat
 ``step`` only; measurements are recorded and captured beforehand); ``ms_per_step`` is
 the median step of the best of a few repeats, ``mean_ms_per_step`` the mean.
 
-Usage: ``python -m swarmloc.bench.speed.estimators [--quick]``; the lead's
-``swarmloc bench speed`` appends these rows.
+Measured by ``swarmloc bench speed`` (these rows among the others).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from dataclasses import dataclass
 
@@ -206,16 +203,3 @@ def measure_rows(quick: bool = False) -> list[dict]:
         t, _ = time_estimator(lambda: ParticleFilter(fixed, network=net, name="pf-nn"), big, 2)
         rows.append(_row("pf-nn", 32, n, t, particles=PAPER_PARTICLES))
     return rows
-
-
-def main(argv: list[str] | None = None) -> None:
-    """Print the rows as JSON lines."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args(argv)
-    for row in measure_rows(quick=args.quick):
-        print(json.dumps(row))
-
-
-if __name__ == "__main__":
-    main()

@@ -10,17 +10,13 @@ one serial episode). Besides ``episodes_per_s``, ``env_steps_per_s`` and
 difference per job). Not measured in quick mode: starting pools and clusters would be
 the whole smoke test.
 
-Usage: ``python -m swarmloc.bench.speed.evaluation [--json PATH]`` (this table alone), or
-``swarmloc bench speed`` (these rows among the others).
+Measured by ``swarmloc bench speed`` (these rows among the others).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from collections.abc import Sequence
-from pathlib import Path
 
 from swarmloc.bench.evaluation.suites import Suite, get_suite
 from swarmloc.envs.tasks import get_spec
@@ -94,21 +90,3 @@ def print_rows(rows: list[dict]) -> None:
                       f"{r['wall_s']:.1f}", "—" if slower is None else f"{100 * slower:+.0f} %",
                       "—" if overhead is None else f"{overhead:+.2f}")
     Console().print(table)
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m swarmloc.bench.speed.evaluation [--json PATH] [--method NAME]``."""
-    from swarmloc.bench.common.files import write_text_atomic
-
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
-    parser.add_argument("--method", default=METHOD, help=f"method evaluated (default {METHOD})")
-    args = parser.parse_args(argv)
-    rows = measure_evaluation(get_suite("quick"), args.method)
-    print_rows(rows)
-    if args.json is not None:
-        write_text_atomic(args.json, json.dumps({"rows": rows}, indent=2))
-
-
-if __name__ == "__main__":
-    main()

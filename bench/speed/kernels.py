@@ -7,7 +7,7 @@ world, one UAV per episode, six anchors). Other modules add their own rows throu
 ``EXTRA_ROWS``, first ``world`` and ``world-unfused`` (the full link-trust step on
 Scale6-v0 at the same B, ``speed/world.py``). Ratios are to FilterPy.
 
-Usage: ``swarmloc bench speed [--json PATH] [--quick]`` (or ``python -m swarmloc.bench.speed``).
+Usage: ``swarmloc bench speed [--json PATH] [--quick]``.
 """
 
 from __future__ import annotations

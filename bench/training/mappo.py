@@ -8,7 +8,7 @@ a plain actor state_dict with a provenance record beside it (``<weights>.json``:
 exact command, frames, wall time, git commit, config, final dev metrics).
 
     swarmloc train mappo --frames 2000000 --seed 1 --weights-out agents/weights/mappo.pt
-    python -m swarmloc.bench.training.mappo --frames 400 --tasks CascadedFault-v0 --run-dir /tmp/run
+    swarmloc train mappo --frames 400 --tasks CascadedFault-v0 --run-dir /tmp/run
 """
 
 from __future__ import annotations
@@ -74,10 +74,7 @@ class TrainSetGruArgs(SetGruConfig):
 
 def command_line() -> str:
     """The command that is running, as a user would type it."""
-    prog = Path(sys.argv[0]).name
-    if prog.endswith(".py"):
-        prog = f"python -m {__spec__.name if __spec__ else 'swarmloc.bench.training.mappo'}"
-    return " ".join([prog, *(shlex.quote(a) for a in sys.argv[1:])])
+    return " ".join([Path(sys.argv[0]).name, *(shlex.quote(a) for a in sys.argv[1:])])
 
 
 #: the code a MAPPO training run depends on (its provenance is "dirty" if any of it changed)
@@ -180,14 +177,3 @@ def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
     write_text_atomic(meta, json.dumps(record, indent=2) + "\n")
     print(f"wrote {out} and {meta} ({result.frames} frames in {result.wall_time_s:.0f} s)")
     return out
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m swarmloc.bench.training.mappo [options]`` (the same options as ``swarmloc train mappo``)."""
-    import tyro
-
-    train_mappo(tyro.cli(TrainMappoArgs, args=argv))
-
-
-if __name__ == "__main__":
-    main()

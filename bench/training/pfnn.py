@@ -20,7 +20,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 
 from swarmloc.agents.registry import WEIGHTS_DIR
 from swarmloc.bench.common.files import write_bytes_atomic
@@ -123,15 +122,3 @@ def train_pfnn(args: TrainPfnnArgs, log=print) -> Path:
     path = write_weights(result, args, fit)
     log(f"wrote {path} and {path.with_suffix('.json')}")
     return path
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m swarmloc.bench.training.pfnn [options]`` (the options of ``swarmloc train pfnn``)."""
-    import tyro
-
-    np.set_printoptions(precision=4)
-    train_pfnn(tyro.cli(TrainPfnnArgs, args=argv))
-
-
-if __name__ == "__main__":
-    main()
