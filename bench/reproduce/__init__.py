@@ -1,0 +1,1 @@
+"""Paper reproductions: one module per ``swarmloc reproduce`` command, each writing a report."""

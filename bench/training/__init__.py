@@ -1,0 +1,1 @@
+"""Training glue: the bench's seed checks and evaluation around the algorithms in ``swarmloc.agents``."""
