@@ -297,7 +297,7 @@ def test_json_and_markdown_agree(report):
 
 def test_the_command_answers_help_and_refuses_bad_input(capsys, tmp_path):
     from swarmloc.bench.cli import main
-    from swarmloc.bench.cli.reproduce_calibration import Options, command_line
+    from swarmloc.bench.cli.reproduce import Calibration
 
     with pytest.raises(SystemExit) as exit_info:
         main(["reproduce", "calibration", "--help"])
@@ -305,12 +305,12 @@ def test_the_command_answers_help_and_refuses_bad_input(capsys, tmp_path):
     help_text = " ".join(capsys.readouterr().out.split())
     for option in ("--suite", "--tasks", "--seeds", "--out-md", "--out-json"):
         assert option in help_text
-    assert Options().suite == "standard-v1"
+    assert Calibration().suite == "standard-v1"
     assert main(["reproduce", "calibration", "--suite", "no-such-suite", "--out-md", str(tmp_path / "c.md")]) == 2
     assert "unknown suite 'no-such-suite'" in capsys.readouterr().out
     assert main(["reproduce", "calibration", "--suite", "standard-v0", "--seeds", "1"]) == 2
     assert "seeds must be in [2, 32]" in capsys.readouterr().out
-    assert command_line(Options(suite="standard-v0", seeds=4)) == (
+    assert Calibration(suite="standard-v0", seeds=4).command_line() == (
         "swarmloc reproduce calibration --suite standard-v0 --seeds 4")
 
 

@@ -6,9 +6,16 @@
   docstrings into ``--help``); its class docstring is the command's help line;
 * ``run(opts: Options) -> int`` — the handler; returns the exit status.
 
+A family of small commands may share one module instead: the table names
+``module:Class``, where ``Class`` is the ``Options`` dataclass and its method ``run(self)``
+the handler (``reproduce.py`` holds the nine ``reproduce`` commands so).
+
 The module imports only what ``Options`` needs (dataclasses, pathlib, tyro and light
 parts of the package); everything heavy (numba kernels, torch, the runner) is imported
 inside ``run``, so ``swarmloc --help`` and ``swarmloc tasks`` start in well under a second.
+
+A command whose extra is not installed (``ModuleNotFoundError`` of one of its packages) ends
+with one line naming the extra to install (``swarmloc.bench.cli.extras``), not a traceback.
 
 ``COMMANDS`` below names every command: a leaf maps to its module; a group (``train``,
 ``reproduce``, ``bench``, ``data``, ``leaderboard``) maps to a table of its members,
@@ -25,11 +32,11 @@ from __future__ import annotations
 import importlib
 import sys
 from importlib import metadata
-from pathlib import Path
-from types import ModuleType
-from typing import Annotated, Any, Callable, Union
+from typing import Annotated, Any, Callable, NamedTuple, Union
 
 import tyro
+
+from .extras import missing_extra, needs_extra
 
 #: a command: the module path of a leaf, or a group's members
 CommandTable = dict[str, "str | CommandTable"]
@@ -54,15 +61,15 @@ COMMANDS: CommandTable = {
         "pfnn": "swarmloc.bench.cli.train_pfnn",
     },
     "reproduce": {
-        "madrl": "swarmloc.bench.cli.reproduce_madrl",
-        "pfnn": "swarmloc.bench.cli.reproduce_pfnn",
-        "immarkf": "swarmloc.bench.cli.reproduce_immarkf",
-        "federated": "swarmloc.bench.cli.reproduce_federated",
-        "dtvirm": "swarmloc.bench.cli.reproduce_dtvirm",
-        "real": "swarmloc.bench.cli.reproduce_real",
-        "labels": "swarmloc.bench.cli.reproduce_labels",
-        "calibration": "swarmloc.bench.cli.reproduce_calibration",
-        "peer-update": "swarmloc.bench.cli.reproduce_peer_update",
+        "madrl": "swarmloc.bench.cli.reproduce:Madrl",
+        "pfnn": "swarmloc.bench.cli.reproduce:Pfnn",
+        "immarkf": "swarmloc.bench.cli.reproduce:Immarkf",
+        "federated": "swarmloc.bench.cli.reproduce:Federated",
+        "dtvirm": "swarmloc.bench.cli.reproduce:Dtvirm",
+        "real": "swarmloc.bench.cli.reproduce:Real",
+        "labels": "swarmloc.bench.cli.reproduce:Labels",
+        "calibration": "swarmloc.bench.cli.reproduce:Calibration",
+        "peer-update": "swarmloc.bench.cli.reproduce:PeerUpdate",
     },
     "bench": {
         "speed": "swarmloc.bench.cli.bench_speed",
@@ -70,6 +77,9 @@ COMMANDS: CommandTable = {
     "data": {
         "import-util": "swarmloc.bench.cli.data_import_util",
         "import-util-tdoa": "swarmloc.bench.cli.data_import_util_tdoa",
+    },
+    "docs": {
+        "readme": "swarmloc.bench.cli.docs_readme",
     },
 }
 
@@ -80,42 +90,38 @@ GROUP_HELP = {
     "reproduce": "Reproduce a paper's tables with our implementations.",
     "bench": "Performance benchmarks.",
     "data": "Import external data sets (e.g. the UTIL flight logs).",
+    "docs": "Regenerate the generated parts of the documentation.",
 }
 
 ENTRY_POINT_GROUP = "swarmloc.commands"
 
 
-def print_report(write: Callable[[], Path]) -> int:
-    """Run a ``reproduce`` command: write its report, then print it.
+class Command(NamedTuple):
+    """A loaded command: its options dataclass and its handler."""
 
-    Args:
-        write: writes the report and returns its path.
-
-    Returns:
-        0, or 2 after printing ``error: …`` when an option names something that does not
-        exist or is not allowed (``ValueError``, ``KeyError``, ``FileNotFoundError``).
-    """
-    try:
-        path = write()
-    except (ValueError, KeyError, FileNotFoundError) as err:
-        print(f"error: {err.args[0] if isinstance(err, KeyError) and err.args else err}")
-        return 2
-    print(path.read_text(encoding="utf-8"))
-    return 0
+    Options: type
+    run: Callable[[Any], int | None]
 
 
-def load_command(module_path: str) -> ModuleType:
-    """Import a command module and check that it follows the convention.
+def load_command(path: str) -> Command:
+    """Import a command (``module`` or ``module:Class``) and check that it follows the convention.
 
     Raises:
-        TypeError: the module lacks a dataclass ``Options`` or a callable ``run``.
+        TypeError: the module lacks a dataclass ``Options`` or a callable ``run``, or the class is
+            not a dataclass with a ``run`` method.
     """
+    module_path, _, class_name = path.partition(":")
     module = importlib.import_module(module_path)
-    options, run = getattr(module, "Options", None), getattr(module, "run", None)
+    if class_name:
+        options = getattr(module, class_name, None)
+        run = getattr(options, "run", None)
+        wanted = f"command {path} must be a dataclass with a method `run(self) -> int`"
+    else:
+        options, run = getattr(module, "Options", None), getattr(module, "run", None)
+        wanted = f"command module {path} must define a dataclass `Options` and a function `run(opts) -> int`"
     if not (isinstance(options, type) and hasattr(options, "__dataclass_fields__")) or not callable(run):
-        raise TypeError(f"command module {module_path} must define a dataclass `Options` and a function "
-                        f"`run(opts) -> int`")
-    return module
+        raise TypeError(wanted)
+    return Command(options, run)
 
 
 def command_table() -> CommandTable:
@@ -128,21 +134,25 @@ def command_table() -> CommandTable:
     return table
 
 
-def _help_line(module: ModuleType) -> str:
-    doc = (module.Options.__doc__ or "").strip()
+def _help_line(command: Command) -> str:
+    doc = (command.Options.__doc__ or "").strip()
     return " ".join(doc.split("\n\n")[0].split())
 
 
-def _parser_type(table: CommandTable, handlers: dict[type, Callable[[Any], int | None]], group: bool) -> Any:
-    """The tyro union of a command table; fills ``handlers`` (Options class → run)."""
+#: a command's handler: the command as typed after ``swarmloc`` and its ``run``
+Handler = tuple[str, Callable[[Any], "int | None"]]
+
+
+def _parser_type(table: CommandTable, handlers: dict[type, Handler], group: bool, prefix: str = "") -> Any:
+    """The tyro union of a command table; fills ``handlers`` (Options class → command, run)."""
     options = []
     for name, entry in table.items():
         if isinstance(entry, str):
-            module = load_command(entry)
-            handlers[module.Options] = module.run
-            options.append(Annotated[module.Options, tyro.conf.subcommand(name, description=_help_line(module))])
+            command = load_command(entry)
+            handlers[command.Options] = (f"{prefix}{name}", command.run)
+            options.append(Annotated[command.Options, tyro.conf.subcommand(name, description=_help_line(command))])
         else:
-            members = _parser_type(entry, handlers, group=True)
+            members = _parser_type(entry, handlers, group=True, prefix=f"{prefix}{name} ")
             options.append(Annotated[members, tyro.conf.subcommand(name, description=GROUP_HELP.get(name))])
     if group:
         # a suppressed None keeps a one-member group a subcommand level (tyro flattens 1-unions)
@@ -158,16 +168,25 @@ def main(argv: list[str] | None = None) -> int:
         argv: arguments (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status.
+        The exit status: 2 after ``error: swarmloc <command> needs the '<extra>' extra: …``
+        when the command imports a package of an extra that is not installed.
     """
-    handlers: dict[type, Callable[[Any], int | None]] = {}
+    handlers: dict[type, Handler] = {}
     parser = _parser_type(command_table(), handlers, group=False)
     parsed = tyro.cli(parser, args=argv, prog="swarmloc",
                       description="swarmloc: benchmark for learned cooperative localization of UAV swarms.")
-    run = handlers.get(type(parsed))
-    if run is None:
+    handler = handlers.get(type(parsed))
+    if handler is None:
         raise RuntimeError(f"no command handles {type(parsed).__name__}")
-    return int(run(parsed) or 0)
+    command, run = handler
+    try:
+        return int(run(parsed) or 0)
+    except ImportError as err:
+        extra = missing_extra(err, command)
+        if extra is None:
+            raise
+        print(f"error: {needs_extra(command, extra)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
