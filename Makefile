@@ -6,7 +6,7 @@ VENV    ?= .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 
-.PHONY: setup test demo bench clean docs
+.PHONY: setup test wheel-check demo bench clean docs
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -26,6 +26,11 @@ setup: $(STAMP)
 # --durations: the slowest tests, to keep the suite inside its 10-minute budget.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile --max-worker-restart=0 --durations=25
+
+# The wheel users install, built and used in fresh virtualenvs outside the tree: the core
+# install without torch, then [all] (.ci/wheel-check says what it runs; about 3 minutes).
+wheel-check: $(STAMP)
+	BUILD_PY=$(BIN)/python PY=$(PY) .ci/wheel-check
 
 demo: $(STAMP)
 	$(BIN)/swarmloc demo

@@ -56,6 +56,12 @@ def env(task_id: str, **kwargs: Any):
 
 def torchrl_env(task_id: str, batch_size: int, device: str = "cpu", **kwargs: Any):
     """Native batched torchrl ``EnvBase`` of a swarmloc task (group ``uav``)."""
-    from .torchrl_env import make_torchrl_env
+    try:
+        from .torchrl_env import make_torchrl_env
+    except ModuleNotFoundError as err:
+        if (err.name or "").split(".")[0] not in ("torch", "tensordict", "torchrl"):
+            raise
+        raise ModuleNotFoundError(f"the torchrl env needs the 'torchrl' extra: pip install 'swarmloc[torchrl]' ({err})",
+                                  name=err.name) from err
 
     return make_torchrl_env(canonical_task_id(task_id), batch_size, device, **kwargs)

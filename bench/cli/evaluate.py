@@ -46,6 +46,7 @@ def run(opts: Options) -> int:
     from rich.console import Console
     from rich.markup import escape
 
+    from swarmloc.bench.cli.extras import missing_extra
     from swarmloc.bench.evaluation.backends import check_backend
     from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate
     from swarmloc.bench.evaluation.score import suite_score
@@ -74,7 +75,9 @@ def run(opts: Options) -> int:
     except EvaluationFailed as err:
         console.print(f"[red]error:[/red] {escape(str(err))}")
         return 1
-    except ImportError as err:  # --backend ray without Ray
+    except ImportError as err:
+        if missing_extra(err) is not None:
+            raise  # torch for a learned method, Ray for --backend ray: the command line names the extra
         console.print(f"[red]error:[/red] {err}")
         return 2
     except KeyboardInterrupt:
@@ -94,7 +97,7 @@ def run(opts: Options) -> int:
         low, high = score.times_ci
         k, n = score.coverage
         closed = "—" if score.gap_closed is None else f"{100 * score.gap_closed:.0f}%"
-        console.print(f"score v1: {score.times:.2f}× lower error than the standard CEKF (95% CI [{low:.2f}, "
+        console.print(f"score: {score.times:.2f}× lower error than the standard CEKF (95% CI [{low:.2f}, "
                       f"{high:.2f}]), gap closed {closed}, IQM g {score.iqm:.2f}, tasks {k}/{n}")
     console.print(f"wrote {opts.out} ({len(results.episodes)} episodes, {time.perf_counter() - started:.1f} s)")
     return 0

@@ -43,18 +43,14 @@ def run(opts: Options) -> int:
 
     import numpy as np
 
+    # without the explain extra these raise ModuleNotFoundError: the command line names the extra
     from swarmloc.agents.registry import load_method
     from swarmloc.bench.common.files import atomic_path
+    from swarmloc.bench.explain import explain
+    from swarmloc.bench.explain.features import FEATURE_NAMES, GROUP_NAMES
+    from swarmloc.bench.explain.figure import plot_chain
+    from swarmloc.bench.explain.report import summarize, write_summary
     from swarmloc.envs.tasks import get_spec
-
-    try:
-        from swarmloc.bench.explain import explain
-        from swarmloc.bench.explain.features import FEATURE_NAMES, GROUP_NAMES
-        from swarmloc.bench.explain.figure import plot_chain
-        from swarmloc.bench.explain.report import summarize, write_summary
-    except ImportError as err:
-        print(f"error: {err}; install the explain extra: pip install 'swarmloc[explain]'")
-        return 2
     started = time.perf_counter()
     overrides = {} if opts.duration is None else {"duration": opts.duration}
     try:

@@ -22,6 +22,7 @@ EXTRA_MODULES: dict[str, frozenset[str]] = {
     "postgresql": frozenset({"sqlalchemy", "psycopg"}),
     "train": frozenset({"torch", "tensordict", "torchrl", "tensorboard"}),
     "explain": frozenset({"torch", "tensordict", "torchrl", "captum"}),
+    "all": frozenset({"torch", "tensordict", "torchrl", "tensorboard", "sqlalchemy", "captum"}),
 }
 
 #: the extra of a command (by its first word) that covers everything it imports in the common case
@@ -30,7 +31,7 @@ COMMAND_EXTRA: dict[str, str] = {
     "explain": "explain",
     "submit": "leaderboard",
     "leaderboard": "leaderboard",
-    "demo": "leaderboard",
+    "demo": "all",  # the learned methods and the leaderboard
     "bench": "bench",
 }
 

@@ -93,6 +93,7 @@ def run(opts: Options, console: Console | None = None) -> int:
     from rich.console import Console
     from rich.text import Text
 
+    from swarmloc.bench.cli.extras import missing_extra
     from swarmloc.leaderboard.errors import StoreError, SubmissionError
     from swarmloc.leaderboard.submit import submit
     from swarmloc.leaderboard.verify import VerifyLimits, run_in_worker
@@ -128,6 +129,8 @@ def run(opts: Options, console: Console | None = None) -> int:
             rerun=rerun,
         )
     except (SubmissionError, StoreError, ValueError, ImportError) as err:
+        if missing_extra(err) is not None:
+            raise  # not the submission's fault: the command line names the extra to install
         out.print(Text(f"submission refused: {err}", style="bold red"))
         return 1
     out.print(Text(receipt.describe()))
