@@ -42,6 +42,10 @@ def wheel(tmp_path_factory) -> tuple[zipfile.ZipFile, str, list[str]]:
     for name in files:
         (tmp / "src" / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / name, tmp / "src" / name)
+    # what an earlier build of a since-deleted module leaves in a checkout: it must not ship
+    stale = tmp / "src" / "build" / "lib" / "swarmloc" / "envs" / "deleted_module.py"
+    stale.parent.mkdir(parents=True)
+    stale.write_text("", encoding="utf-8")
     proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-v", "-w", str(tmp / "dist"),
                            str(tmp / "src")], check=False, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -60,6 +64,7 @@ def test_every_code_folder_ships_as_a_package(wheel):
     assert not no_init, f"code folders without __init__.py (find_packages skips them): {no_init}"
     missing = sorted(f for f in modules if f"swarmloc/{f}" not in names)
     assert not missing, f"modules missing from the wheel: {missing}"
+    assert "swarmloc/envs/deleted_module.py" not in names, "a stale build/lib leaked into the wheel"
 
 
 def test_weights_results_and_static_files_ship(wheel):
