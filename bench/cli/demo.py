@@ -96,8 +96,8 @@ def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: boo
         why, source = lines[0], next((ln for ln in lines if ln.startswith("The data comes from")), "")
         Console().print(f"[yellow]skipping suite {suite_name} (real UTIL flights, {len(missing)} of "
                         f"{len(suite.tasks)} tasks without data):[/yellow] {escape(why)} {escape(source)} Import "
-                        "them with `swarmloc data import-util` and `swarmloc data import-util-tdoa` (see README, "
-                        f"'Real flights').")
+                        "them with `swarmloc data import-util` and `swarmloc data import-util-tdoa` (see "
+                        "docs/real-flights.md).")
         return False
     # every seed of a recorded flight replays the same recording (the seed moves only the initial
     # prior), so the demo runs one seed per flight; `swarmloc evaluate --suite real-v1` runs all four
