@@ -179,8 +179,8 @@ def gradual_fault() -> TaskSpec:
 def util_flight() -> TaskSpec:
     """The UTIL dataset's real Crazyflie flight ``twr-obs-log1``, replayed (not simulated).
 
-    The UTIL data set [util] (docs/references.md) is not shipped; this repository's README
-    says how to import it. One UAV, 8 UWB anchors (two-way ranging, ≈10 Hz each), IMU at
+    The UTIL data set [util] (docs/references.md) is not shipped; docs/real-flights.md says
+    how to import it. One UAV, 8 UWB anchors (two-way ranging, ≈10 Hz each), IMU at
     1 kHz, Vicon truth.
     Scored from take-off (log time 9.15 s) to landing (59.62 s): the README's airborne
     window, which the truth altitude reproduces (``util_flight.airborne_window``). The
@@ -280,8 +280,8 @@ def util_tdoa(name: str) -> Callable[[], TaskSpec]:
             else "the commanded circle r 1.5 m, ω 0.6 rad/s, z 1.5 m")
     make.__doc__ = f"""The UTIL dataset's real {mode} flight ``{flight}``, replayed: constellation {constellation}, obstacles {obstacles}.
 
-    The UTIL data set [util] (docs/references.md) is not shipped; this repository's README
-    says how to import it (``swarmloc data import-util-tdoa``). One Crazyflie flies
+    The UTIL data set [util] (docs/references.md) is not shipped; docs/real-flights.md says
+    how to import it (``swarmloc data import-util-tdoa``). One Crazyflie flies
     {path}; eight UWB anchors broadcast and the tag only listens: {mode}
     ({"each anchor with the next one in the ring, 8 pairs" if mode == "TDOA2"
       else "every pair, 28 channels, either order of arrival"}); IMU at 1 kHz, Vicon truth.
