@@ -39,8 +39,12 @@ bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	$(BIN)/swarmloc bench speed
 
+# The generated pages (one per task; the README's leaderboard from the shipped results),
+# then the site in site/ (mkdocs.yml; --strict: a broken link or anchor fails the build).
 docs: $(STAMP)
 	$(BIN)/python -m swarmloc.envs.docgen docs/tasks
+	$(BIN)/swarmloc docs readme
+	$(BIN)/python -m mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) build *.egg-info
