@@ -18,7 +18,7 @@ A command whose extra is not installed (``ModuleNotFoundError`` of one of its pa
 with one line naming the extra to install (``swarmloc.bench.cli.extras``), not a traceback.
 
 ``COMMANDS`` below names every command: a leaf maps to its module; a group (``train``,
-``reproduce``, ``bench``, ``data``, ``leaderboard``) maps to a table of its members,
+``reproduce``, ``bench``, ``data``, ``docs``, ``leaderboard``) maps to a table of its members,
 registered exactly the same way. Commands from other packages plug in through the
 ``swarmloc.commands`` entry-point group (``name = "package.module"``, the module following
 the same convention)::
