@@ -52,6 +52,11 @@ def run(opts: Options) -> int:
     from swarmloc.bench.evaluation.demo import run_demo
     from swarmloc.bench.evaluation.suites import get_suite
 
+    if opts.leaderboard:
+        # the CLI is every room's front door: only its handlers reach the leaderboard. Imported
+        # first: without the store's extra the demo stops here, not after minutes of episodes
+        from swarmloc.leaderboard.shipped import show_leaderboard
+
     methods = list(opts.methods) or list(DEMO_METHODS)
     if methods == ["all"]:
         methods = method_names()
@@ -65,9 +70,6 @@ def run(opts: Options) -> int:
     if opts.suite in ("quick", "quick-v1"):  # the real flights join the demo wherever their data is imported
         run_real_flight_demo(methods, opts.out / REAL_SUITE, workers=opts.workers, plots=opts.plots, **where)
     if opts.leaderboard:
-        # the CLI is every room's front door: only its handlers reach the leaderboard
-        from swarmloc.leaderboard.shipped import show_leaderboard
-
         show_leaderboard(opts.out, opts.db)
     return 0
 
