@@ -78,7 +78,7 @@ def test_python_blocks_run(page: Path, tmp_path: Path, monkeypatch: pytest.Monke
             if saved_as:
                 (tmp_path / saved_as.group(1)).write_text(code, encoding="utf-8")
             try:
-                exec(compile(code, f"{_name(page)} block {number}", "exec"), namespace)
+                exec(compile(code, f"{_name(page)} block {number}", "exec"), namespace)  # noqa: S102 - the test itself
             except Exception as err:
                 raise AssertionError(f"{_name(page)}: Python block {number} fails:\n{code}") from err
     finally:
@@ -158,7 +158,8 @@ def help_text(path: tuple[str, ...]) -> str:
     return out.getvalue()
 
 
-SHOWN = sorted({(_name(page), line) for page in COMMAND_PAGES for line in shown_commands(page.read_text(encoding="utf-8"))})
+SHOWN = sorted({(_name(page), line) for page in COMMAND_PAGES
+                for line in shown_commands(page.read_text(encoding="utf-8"))})
 
 
 def test_the_pages_show_commands() -> None:
@@ -180,7 +181,8 @@ def test_shown_command_and_its_options_exist(page: str, line: str, monkeypatch: 
         text = help_text(path)
         for option in options:
             known = sorted(set(re.findall(r"(?<![\w-])--[a-z][\w-]*", text)))
-            assert option in known, f"{page}: {line!r}: swarmloc {' '.join(path)} has no option {option}; it has {known}"
+            assert option in known, (
+                f"{page}: {line!r}: swarmloc {' '.join(path)} has no option {option}; it has {known}")
 
 
 def test_an_unknown_option_or_command_is_caught() -> None:
@@ -193,7 +195,8 @@ def test_an_unknown_option_or_command_is_caught() -> None:
 
 def test_fences_are_read_as_a_reader_sees_them() -> None:
     text = "```python\nx = 1\n```\n\n```text\nswarmloc nothing\n```\n```bash\nswarmloc tasks  # list\n```\n"
-    assert fenced_blocks(text) == [("python", "x = 1\n"), ("text", "swarmloc nothing\n"), ("bash", "swarmloc tasks  # list\n")]
+    assert fenced_blocks(text) == [("python", "x = 1\n"), ("text", "swarmloc nothing\n"),
+                                   ("bash", "swarmloc tasks  # list\n")]
     assert shown_commands("`swarmloc demo --out d` and\n```bash\nswarmloc evaluate \\\n  --suite s\n```\n"
                           "```text\nswarmloc leaderboard — suite x\n```\n```console\n$ swarmloc tasks\n```") == [
         "swarmloc demo --out d", "swarmloc evaluate --suite s", "swarmloc tasks"]
