@@ -19,8 +19,7 @@ monitoring (``cusum``, ``raim``) are in ``integrity.py`` (docs/methods.md).
 | ``federated-coef`` | α = R0 / R_k from the allocation coefficient | federated eq. 17–21 |
 | ``non-cooperative`` | α = 0 on peer channels (skipped), 1 on the absolute ones | each UAV alone |
 | ``random`` | α ~ U(0, 1), seeded per episode | the floor |
-| ``oracle`` | α = α_min on channels with a fault label v1, else 1 | privileged ceiling of score v1 |
-| ``oracle-v0`` | α = α_min on channels with a fault label v0, else 1 | reference of the v0 normalized score |
+| ``oracle`` | α = α_min on channels with an error label, else 1 | privileged ceiling of the score |
 """
 
 from __future__ import annotations
@@ -76,7 +75,7 @@ class _TrustPolicy:
 
 
 class UniformTrust(_TrustPolicy):
-    """α = 1 on every channel: the standard CEKF (normalized score 0)."""
+    """α = 1 on every channel: the standard CEKF (the score's reference: gain 0)."""
 
     def act(self, inp: TrustInput) -> np.ndarray:
         """Full trust. Returns ``(B, N, L)`` ones."""
@@ -279,40 +278,30 @@ class RandomTrust(_TrustPolicy):
         return out
 
 
-#: the label sets an oracle can read (``PrivilegedInfo``)
-LABEL_VERSIONS = ("v1", "v0")
-
-
 class OracleTrust(_TrustPolicy):
-    """Privileged reference: α_min on channels whose ground-truth fault label is set.
+    """Privileged reference: α_min on channels whose error label is set (``swarmloc.envs.labels``).
 
-    With labels v1 (``oracle``) it is the ceiling of the trust policies (score v1); with
-    labels v0 (``oracle-v0``) it defines the v0 normalized score 1. It reads labels
-    through ``observe_privileged``, which the runner calls before every ``act``; its
-    results are shown apart and never ranked.
+    It is the ceiling of the trust policies (``oracle``). It reads the labels through
+    ``observe_privileged``, which the runner calls before every ``act``; its results are
+    shown apart and never ranked.
 
     Args:
         alpha_reject: trust of a labelled channel, in (0, 1] (default α_min = 0.01,
             below α_th, so the channel is skipped).
-        labels: ``"v1"`` (``PrivilegedInfo.labels_v1``) or ``"v0"`` (``PrivilegedInfo.labels``).
-        label_sigmas, vector_radius: v1 only: label at these thresholds instead of the
-            shipped ones (``PrivilegedInfo.systematic_sigmas`` above
+        label_sigmas, vector_radius: label at these thresholds instead of the shipped ones
+            (``PrivilegedInfo.systematic_sigmas`` above
             ``envs.labels.label_thresholds(kind, label_sigmas, vector_radius)``; either may
             be None for the shipped value). The calibration of the thresholds uses them.
     """
 
     privileged = True
 
-    def __init__(self, alpha_reject: float = ALPHA_MIN, labels: str = "v1", label_sigmas: float | None = None,
+    def __init__(self, alpha_reject: float = ALPHA_MIN, label_sigmas: float | None = None,
                  vector_radius: float | None = None) -> None:
         super().__init__()
         self.alpha_reject = _check_probability("alpha_reject", alpha_reject, low_open=True)
-        if labels not in LABEL_VERSIONS:
-            raise ValueError(f"labels must be one of {LABEL_VERSIONS}, got {labels!r}")
         self.custom = label_sigmas is not None or vector_radius is not None
-        if self.custom and labels != "v1":
-            raise ValueError(f"label_sigmas and vector_radius apply to labels v1, not {labels!r}")
-        self.label_version, self.label_sigmas, self.vector_radius = labels, label_sigmas, vector_radius
+        self.label_sigmas, self.vector_radius = label_sigmas, vector_radius
         if self.custom:
             self._k = LABEL_SIGMAS if label_sigmas is None else label_sigmas
             label_thresholds(np.zeros((1, 1), dtype=np.int64), self._k, vector_radius)  # validate now
@@ -327,16 +316,14 @@ class OracleTrust(_TrustPolicy):
         self._labels = None
 
     def observe_privileged(self, info: PrivilegedInfo) -> None:
-        """Receive the pending measurements' fault labels ``(B, N, L)`` (the version it reads)."""
-        if self.label_version == "v0":
-            labels = info.labels
-        elif not self.custom:
-            labels = info.labels_v1
+        """Receive the pending measurements' error labels ``(B, N, L)`` (at its own thresholds if custom)."""
+        if not self.custom:
+            labels = info.error_labels
         else:
             sigmas = info.systematic_sigmas
             labels = None if sigmas is None else np.asarray(sigmas) > self._threshold
         if labels is None:
-            need = "systematic_sigmas" if self.custom else "labels_v1"
+            need = "systematic_sigmas" if self.custom else "error_labels"
             raise ValueError(f"this oracle reads PrivilegedInfo.{need}, which was not provided")
         labels = np.asarray(labels, dtype=bool)
         if labels.shape != self._shape:
@@ -400,10 +387,5 @@ def random_policy() -> RandomTrust:
 
 
 def oracle_policy() -> OracleTrust:
-    """Registry factory: ``oracle`` (privileged, labels v1)."""
-    return OracleTrust(ALPHA_MIN, "v1")
-
-
-def oracle_v0_policy() -> OracleTrust:
-    """Registry factory: ``oracle-v0`` (privileged, labels v0: the v0 normalized score's reference)."""
-    return OracleTrust(ALPHA_MIN, "v0")
+    """Registry factory: ``oracle`` (privileged, error labels)."""
+    return OracleTrust(ALPHA_MIN)

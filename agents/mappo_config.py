@@ -104,7 +104,7 @@ class MappoConfig:
     """show a tqdm progress bar"""
     label_coef: float = 0.0
     """weight of a privileged auxiliary loss: the actor's logit is also fitted (binary cross-entropy) to
-    "healthy" = not fault-labelled (labels v1 of the collected measurements; training only, as the
+    "healthy" = not fault-labelled (error labels of the collected measurements; training only, as the
     privileged critic's position error; needs collectors=0). 0: the paper's MAPPO"""
     label_coef_final: float | None = None
     """the label loss weight at the end of the run, reached linearly from ``label_coef`` (a warm start that

@@ -199,7 +199,7 @@ class LoopSmoother(nn.Module):
 
 
 class PendingLabels(nn.Module):
-    """Training only: the fault labels v1 of the measurements the policy is deciding, read from the env.
+    """Training only: the error labels of the measurements the policy is deciding, read from the env.
 
     The collectors run in this process, so the env of the batch's task is at hand
     (``select``); its pending labels are those of the observation the policy sees. They go
@@ -217,7 +217,7 @@ class PendingLabels(nn.Module):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         if self._key >= len(self.envs):  # a collector's probe call while it is being built
             return torch.zeros(obs.shape[:-1], dtype=torch.bool)
-        labels = self.envs[self._key].batch.pending_labels_v1()
+        labels = self.envs[self._key].batch.pending_error_labels()
         if labels.shape != obs.shape[:-1]:
             raise RuntimeError(f"labels {labels.shape} do not match the observation {tuple(obs.shape[:-1])}")
         return torch.from_numpy(np.array(labels, dtype=bool))

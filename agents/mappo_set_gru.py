@@ -15,7 +15,7 @@ because the actor is recurrent, how the PPO update replays it:
 * **Loss**: the clipped PPO surrogate per channel with its UAV's advantage (GAE on the
   per-UAV standard reward), the entropy bonus, the value loss of the centralized critic,
   and a **privileged auxiliary loss** (``label_coef``): the binary cross-entropy of the
-  actor's logit against "healthy", i.e. not fault-labelled (labels v1 of the collected
+  actor's logit against "healthy", i.e. not fault-labelled (error labels of the collected
   measurements, read from the env in this process). Like the critic's position error, the
   labels exist only while training; the actor never sees them. Without it (``label_coef
   0``) both this actor and the paper's collapse to α ≈ 1 on the v1 families within 0.4–0.8 M

@@ -273,18 +273,18 @@ class PrivilegedInfo:
     """Privileged information, handed only to methods marked ``privileged = True``.
 
     Attributes:
-        labels: ``(B, N, L)`` bool fault labels v0 of the pending measurements (the v0
-            metrics' labels; ``oracle-v0`` reads them).
-        labels_v1: ``(B, N, L)`` bool fault labels v1 (``swarmloc.envs.labels``: systematic
+        labels: ``(B, N, L)`` bool injected-fault labels of the pending measurements (a fault
+            the scenario injected: what the detection metrics count, ``SenseBuffers.label``).
+        error_labels: ``(B, N, L)`` bool error labels (``swarmloc.envs.labels``: systematic
             error above k·σ_eff). Track A: the core's, peer links included through the
             neighbour's broadcast estimate; Track B: the world's, the measurement's own
             error only (an estimator's estimates are its own). None where not provided.
         systematic_sigmas: ``(B, N, L)`` the systematic error in units of σ_eff behind
-            ``labels_v1`` (Track A only; None otherwise), for oracles at another k.
+            ``error_labels`` (Track A only; None otherwise), for oracles at another k.
     """
 
     labels: np.ndarray
-    labels_v1: np.ndarray | None = None
+    error_labels: np.ndarray | None = None
     systematic_sigmas: np.ndarray | None = None
 
 

@@ -115,14 +115,11 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("mappo-set-gru", "swarmloc.agents.set_gru_policy:mappo_set_gru", "A", False, True,
                 "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True,
-                "privileged: α_min on faults labelled v1 (the trust ceiling)"),
-    MethodEntry("oracle-v0", f"{_A}:oracle_v0_policy", "A", True, True,
-                "privileged: α_min on faults labelled v0 (v0 normalized score 1)"),
+                "privileged: α_min on channels with an error label (the trust ceiling)"),
 )}
 
-#: the two methods that define the v0 normalized score (0 and 1); the v0 oracle, so every
-#: v0 number stays what it was
-REFERENCE_UNIFORM, REFERENCE_ORACLE = "uniform", "oracle-v0"
+#: the reference of the score: every episode's gain is log2(RMSE of uniform / RMSE) on the same episode
+REFERENCE_UNIFORM = "uniform"
 
 _ENTRY = re.compile(r"^(?P<module>[^:]+):(?P<attr>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)$")
 

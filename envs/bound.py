@@ -87,8 +87,8 @@ from .labels import LABEL_SIGMAS
 from .specs import TaskSpec
 
 #: A channel-step enters the bound unless its own injected systematic error (NLOS bias, GPS
-#: drift: ``SenseBuffers.injected``) exceeds this many nominal σ: the k of labels v1
-#: (``labels.LABEL_SIGMAS``), so the bound leaves out what labels v1 call a fault of the
+#: drift: ``SenseBuffers.injected``) exceeds this many nominal σ: the k of the error labels
+#: (``labels.LABEL_SIGMAS``), so the bound leaves out what the error labels call a fault of the
 #: measurement itself. (Labels v1 judge a 3-vector channel by a wider radius and count the
 #: heavy-tail excess of hybrid GPS noise too; no v0 task's GPS error comes near either.)
 BOUND_LABEL_SIGMAS = LABEL_SIGMAS

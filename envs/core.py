@@ -39,8 +39,8 @@ class CoreStep:
         update_valid: ``(B, N, L)`` measurement present in the last update (what its reward scores).
         estimate: ``(B, N, 3)`` posterior position of the last update (prior mean after reset).
         truth: ``(B, N, 3)`` true position at the last update.
-        label: ``(B, N, L)`` fault labels (v0) of the measurements of the last update.
-        label_v1: ``(B, N, L)`` their labels v1 (``labels.py``: systematic error, peer links
+        label: ``(B, N, L)`` injected-fault labels (``SenseBuffers.label``) of the measurements of the last update.
+        error_label: ``(B, N, L)`` their error labels (``labels.py``: systematic error, peer links
             included through the neighbour's broadcast estimate, above k·σ_eff).
         applied: ``(B, N, L)`` trust applied at the last update (1 after reset).
         active: ``(B, N, L)`` channels used by the last update.
@@ -59,7 +59,7 @@ class CoreStep:
     estimate: np.ndarray
     truth: np.ndarray
     label: np.ndarray
-    label_v1: np.ndarray
+    error_label: np.ndarray
     applied: np.ndarray
     active: np.ndarray
     flops: np.ndarray
@@ -94,21 +94,21 @@ class LinkTrustCore:
         self.P = np.zeros((n_b, n, 6, 6))
         self._prior_pos = np.zeros((n_b, n, 3))
         self._r0 = np.ascontiguousarray(self.layout.r0)
-        #: ``(N, L)`` labels v1 threshold per channel (the world's, so that its own-error labels
+        #: ``(N, L)`` error-label threshold per channel (the world's, so that its own-error labels
         #: and the core's agree)
         threshold = getattr(world, "label_threshold", None)
         self.label_threshold = np.ascontiguousarray(label_thresholds(self.layout.kind) if threshold is None
                                                     else threshold, dtype=np.float64)
         #: ``(B, N, L)`` privileged: the pending measurements' systematic error in units of σ_eff
-        #: and their labels v1 (``labels.py``); metrics and ``observe_privileged`` only
+        #: and their error labels (``labels.py``); metrics and ``observe_privileged`` only
         self.pending_systematic_sigmas = np.zeros((n_b, n, n_l))
-        self.pending_label_v1 = np.zeros((n_b, n, n_l), dtype=np.bool_)
+        self.pending_error_label = np.zeros((n_b, n, n_l), dtype=np.bool_)
         z = lambda *shape, dt=np.float64: np.zeros(shape, dtype=dt)  # noqa: E731
         self._out = CoreStep(
             resid=z(n_b, n, n_l), pred=z(n_b, n, n_l), nis=z(n_b, n, n_l), prev_trust=np.ones((n_b, n, n_l)),
             jerk=z(n_b, n), valid=z(n_b, n, n_l, dt=np.bool_), update_valid=z(n_b, n, n_l, dt=np.bool_),
             estimate=z(n_b, n, 3), truth=z(n_b, n, 3),
-            label=z(n_b, n, n_l, dt=np.bool_), label_v1=z(n_b, n, n_l, dt=np.bool_), applied=np.ones((n_b, n, n_l)),
+            label=z(n_b, n, n_l, dt=np.bool_), error_label=z(n_b, n, n_l, dt=np.bool_), applied=np.ones((n_b, n, n_l)),
             active=z(n_b, n, n_l, dt=np.bool_), flops=z(n_b, n), steps=z(n_b, dt=np.int64),
             done=z(n_b, dt=np.bool_),
         )
@@ -128,8 +128,8 @@ class LinkTrustCore:
             world_imu=buf.imu, world_z=buf.z, world_valid=buf.valid, world_label=buf.label,
             world_systematic=buf.systematic, x=self.x, P=self.P, prior_pos=self._prior_pos,
             imu_prev=np.zeros_like(buf.imu), pending_sigmas=self.pending_systematic_sigmas,
-            pending_label_v1=self.pending_label_v1, resid=o.resid, pred=o.pred, nis=o.nis,
-            valid=o.valid, jerk=o.jerk, estimate=o.estimate, truth=o.truth, label=o.label, label_v1=o.label_v1,
+            pending_error_label=self.pending_error_label, resid=o.resid, pred=o.pred, nis=o.nis,
+            valid=o.valid, jerk=o.jerk, estimate=o.estimate, truth=o.truth, label=o.label, error_label=o.error_label,
             update_valid=o.update_valid, applied=o.applied, prev_trust=o.prev_trust, active=o.active, flops=o.flops,
             steps=o.steps, done=o.done, moving=np.zeros(self.batch_size, dtype=bool),
         )
@@ -182,7 +182,7 @@ class LinkTrustCore:
         o.prev_trust[idx] = 1.0
         o.applied[idx] = 1.0
         o.label[idx] = False
-        o.label_v1[idx] = False
+        o.error_label[idx] = False
         o.update_valid[idx] = False
         o.active[idx] = False
         o.flops[idx] = 0.0

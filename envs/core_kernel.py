@@ -13,7 +13,7 @@ batch size); both take their named tuples through a ``StepHandle``. Per episode 
    the world inputs are None, for worlds that sense in Python), every UAV predicts to it
    (``cekf.predict_uav``) and the per-channel innovation features at the prior are
    computed (``cekf.features_uav``), with the IMU jerk ‖u(k+1) − u(k)‖, and the pending
-   measurements' labels v1 from the truth, the world's systematic errors and the priors
+   measurements' error labels from the truth, the world's systematic errors and the priors
    (``labels.channel_sigmas``: a peer link carries its neighbour's broadcast-estimate error).
 
 Without scoring (after a reset) only step 2 runs, for the episodes in ``advance``. Every
@@ -54,8 +54,8 @@ class FilterArrays(NamedTuple):
         peer_update: ``cekf.PEER_UPDATE_CODES`` of ``FilterSettings.peer_update`` (0: the
             neighbour as a known point; 1: covariance intersection).
         kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²];
-            sigma ``(N, L)`` the nominal σ [m] (labels v1 divide by it, as the world does).
-        label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff.
+            sigma ``(N, L)`` the nominal σ [m] (the error labels divide by it, as the world does).
+        label_threshold: ``(N, L)`` error-label threshold on the systematic error in σ_eff.
         anchors: ``(A, 3)``; landmarks ``(M, 3)`` [m].
 
     The world's step buffers (views; the world writes them):
@@ -68,14 +68,14 @@ class FilterArrays(NamedTuple):
         prior_pos: ``(B, N, 3)`` the broadcast prior positions (peer channels linearise at them).
         imu_prev: ``(B, N, 3)`` IMU reading of the step before the pending one (for the jerk).
 
-    Privileged (labels v1 of the pending measurements; never an observation):
+    Privileged (error labels of the pending measurements; never an observation):
         pending_sigmas: ``(B, N, L)`` systematic error in units of σ_eff (0 where absent).
-        pending_label_v1: ``(B, N, L)`` bool, present and ``pending_sigmas > label_threshold``.
+        pending_error_label: ``(B, N, L)`` bool, present and ``pending_sigmas > label_threshold``.
 
     Step outputs (the ``CoreStep`` arrays, same names and shapes):
         resid, pred, nis, valid: ``(B, N, L)`` features of the pending update.
         jerk: ``(B, N)``.
-        estimate, truth: ``(B, N, 3)``; label, label_v1, update_valid, applied, prev_trust,
+        estimate, truth: ``(B, N, 3)``; label, error_label, update_valid, applied, prev_trust,
         active ``(B, N, L)``; flops ``(B, N)`` of the last update.
         steps: ``(B,)`` int64 updates done; done ``(B,)`` bool.
 
@@ -108,7 +108,7 @@ class FilterArrays(NamedTuple):
     prior_pos: np.ndarray
     imu_prev: np.ndarray
     pending_sigmas: np.ndarray
-    pending_label_v1: np.ndarray
+    pending_error_label: np.ndarray
     resid: np.ndarray
     pred: np.ndarray
     nis: np.ndarray
@@ -117,7 +117,7 @@ class FilterArrays(NamedTuple):
     estimate: np.ndarray
     truth: np.ndarray
     label: np.ndarray
-    label_v1: np.ndarray
+    error_label: np.ndarray
     update_valid: np.ndarray
     applied: np.ndarray
     prev_trust: np.ndarray
@@ -173,7 +173,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                     f.truth[b, i, d] = f.world_pos[b, i, d]
                 for l in range(n_l):
                     f.label[b, i, l] = f.world_label[b, i, l]
-                    f.label_v1[b, i, l] = f.pending_label_v1[b, i, l]
+                    f.error_label[b, i, l] = f.pending_error_label[b, i, l]
                     f.update_valid[b, i, l] = f.world_valid[b, i, l]
                     f.prev_trust[b, i, l] = f.applied[b, i, l]
                     f.applied[b, i, l] = trust[b, i, l]
@@ -189,7 +189,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                     for d in range(3):
                         f.imu_prev[b, i, d] = f.world_imu[b, i, d]
         sense_episodes(w, fs, f.moving, lo, hi)
-    # ---- predict to it, then the features and labels v1 (peer channels read the neighbours' priors)
+    # ---- predict to it, then the features and error labels (peer channels read the neighbours' priors)
     q = f.imu_sigma * f.imu_sigma
     for b in range(lo, hi):
         if not f.moving[b]:
@@ -216,7 +216,7 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
                     sig = channel_sigmas(f.kind[i, l], f.target[i, l], f.sigma[i, l], e[b, i, l, 0], e[b, i, l, 1],
                                          e[b, i, l, 2], pos_b, prior_b, P_b, i)
                 f.pending_sigmas[b, i, l] = sig
-                f.pending_label_v1[b, i, l] = f.world_valid[b, i, l] and sig > f.label_threshold[i, l]
+                f.pending_error_label[b, i, l] = f.world_valid[b, i, l] and sig > f.label_threshold[i, l]
 
 
 @structref.register

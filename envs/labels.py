@@ -1,4 +1,4 @@
-"""Fault labels v1: the systematic error of a measurement as the filter uses it.
+"""Error labels: the systematic error of a measurement as the filter uses it.
 
 A channel-step is labelled faulty when its *systematic* error exceeds k·σ_eff
 (``LABEL_SIGMAS`` = k = 1.5). Systematic is everything but the channel's nominal white noise:
@@ -41,12 +41,13 @@ followers have nothing else to lean on): the Mahalanobis radius 1.5 would cut 52
 them (χ²₃ > 2.25), hence the 3σ false-alarm radius for 3-vector channels.
 
 The world writes the measurement's own part
-(``SenseBuffers.label_v1``, what a Track B estimator's privileged channel gets: its
+(``SenseBuffers.error_label``, what a Track B estimator's privileged channel gets: its
 estimates are its own); the link-trust core adds the neighbour part from the CEKF priors
-it holds (``CoreStep.label_v1`` and ``LinkTrustCore.pending_label_v1``). Both are
+it holds (``CoreStep.error_label`` and ``LinkTrustCore.pending_error_label``). Both are
 privileged: metrics and ``observe_privileged`` only, never an observation.
 
-The v0 labels (``label``) stay as they were (the v0 metrics and score read them).
+They are not the world's injected-fault labels (``SenseBuffers.label``: a fault the scenario
+injected, what the detection metrics count), which every task keeps as they were.
 ``labels_reference`` holds the readable numpy version of the rule; tests hold the two equal.
 """
 

@@ -1,4 +1,4 @@
-"""Readable numpy version of fault labels v1 (``labels.py``), the oracle of the kernels' tests.
+"""Readable numpy version of the error labels (``labels.py``), the oracle of the kernels' tests.
 
 One episode-step at a time, dense linear algebra, no shortcuts: for channel l of UAV i
 
@@ -54,7 +54,7 @@ def systematic_sigmas_reference(kind: np.ndarray, target: np.ndarray, sigma: np.
     return out
 
 
-def labels_v1_reference(kind: np.ndarray, target: np.ndarray, sigma: np.ndarray, systematic: np.ndarray,
+def error_labels_reference(kind: np.ndarray, target: np.ndarray, sigma: np.ndarray, systematic: np.ndarray,
                         valid: np.ndarray, pos: np.ndarray, prior_pos: np.ndarray, P: np.ndarray,
                         threshold: np.ndarray) -> np.ndarray:
     """Labels v1 ``(N, L)`` of one episode-step: present and ``systematic_sigmas > threshold``.
@@ -66,9 +66,9 @@ def labels_v1_reference(kind: np.ndarray, target: np.ndarray, sigma: np.ndarray,
     return valid & (systematic_sigmas_reference(kind, target, sigma, systematic, pos, prior_pos, P) > threshold)
 
 
-def own_labels_v1_reference(kind: np.ndarray, sigma: np.ndarray, systematic: np.ndarray, valid: np.ndarray,
+def own_error_labels_reference(kind: np.ndarray, sigma: np.ndarray, systematic: np.ndarray, valid: np.ndarray,
                             threshold: np.ndarray) -> np.ndarray:
-    """The world's labels v1 ``(..., N, L)``: the measurement's own error only (no neighbour part).
+    """The world's error labels ``(..., N, L)``: the measurement's own error only (no neighbour part).
 
     Args:
         kind, sigma, threshold: ``(N, L)``; systematic ``(..., N, L, 3)``; valid ``(..., N, L)``.

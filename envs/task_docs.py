@@ -175,8 +175,9 @@ def _measurement_model(spec: TaskSpec) -> str:
     if recorded and s.tdoa is not None:
         faults = ("Real, not injected: the recording's own NLOS, outliers and dropouts. Range differences larger "
                   "than their anchors' baseline are dropped; a step without an arrival masks the channel. A range "
-                  "difference is labelled faulty (labels v0) when its residual against the truth exceeds 3σ; the "
-                  "values are raw (no calibration: the per-pair offsets of 0.1–0.25 m stay).")
+                  "difference is labelled faulty (the label the detection metrics count) when its residual against "
+                  "the truth exceeds 3σ; the values are raw (no calibration: the per-pair offsets of 0.1–0.25 m "
+                  "stay).")
     elif recorded:
         faults = ("Real, not injected: the recording's own NLOS and outliers (anchor 6 drifts like NLOS; sparse "
                   "spikes on anchors 1, 3, 7). A range is labelled faulty when it deviates from its anchor's median "

@@ -104,7 +104,7 @@ def scale_v1(n: int) -> Callable[[], TaskSpec]:
 
 
 def cascaded_fault_v1() -> TaskSpec:
-    """CascadedFault-v0 unchanged: the world was right, the v0 oracle was not (its labels v1 now follow the error)."""
+    """CascadedFault-v0 unchanged: the world was right, its oracle was not (the error labels follow the error)."""
     return _v1(cascaded_fault())
 
 
@@ -374,8 +374,8 @@ CATALOGUE_V1: dict[str, Callable[[], TaskSpec]] = {
 
 #: the Version History line of each v1 task: what changed from v0 and why (task_envs adds it)
 HISTORY_V1: dict[str, str] = {
-    "swarmloc/Ideal-v1": "v1: the world unchanged; the control task of benchmark v1 (labels v1, the information bound, "
-                         "score v1).",
+    "swarmloc/Ideal-v1": "v1: the world unchanged; the control task of benchmark v1 (the error labels, the information "
+                         "bound, the score against uniform).",
     "swarmloc/NLOS-v1": "v1: the indoor NLOS process (bias around 0.6 m, σ 0.8 m, about 40 % of the links biased at "
                         "once: the UTIL obstacle residuals; episodes grow from zero) instead of rare 2.5 m biases, "
                         "at full size at once, that a one-step χ² gate removes.",
@@ -384,8 +384,9 @@ HISTORY_V1: dict[str, str] = {
     **{f"swarmloc/Scale{n}-v1": "v1: the indoor NLOS process on every peer link and clean anchors instead of NLOS on "
                                 "every second UAV's links, so uniform trust degrades with N (madrl Table 4)."
        for n in (2, 4, 6, 8, 16, 32)},
-    "swarmloc/CascadedFault-v1": "v1: the world unchanged; scored with labels v1, whose peer labels follow the "
-                                 "neighbour's estimate error past the IMU fault (the v0 oracle was not a ceiling).",
+    "swarmloc/CascadedFault-v1": "v1: the world unchanged; its oracle reads the error labels, whose peer labels follow "
+                                 "the neighbour's estimate error past the IMU fault (the oracle on the injected-fault "
+                                 "labels was not a ceiling).",
     "swarmloc/CascadedFaultRandom-v1": "v1: scored on each episode's healthy nodes, with the faulty nodes' recovery "
                                        "time as the recovery_s metric (v0 scored every node, so a lock-out swamped "
                                        "the suite).",

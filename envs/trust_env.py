@@ -267,12 +267,12 @@ class TrustEnvBatch:
         return self._last
 
     def pending_labels(self) -> np.ndarray:
-        """``(B, N, L)`` fault labels v0 of the pending measurements (privileged: metrics and oracles only)."""
+        """``(B, N, L)`` injected-fault labels of the pending measurements (privileged: the detection metrics')."""
         return self.core.world.buffers.label
 
-    def pending_labels_v1(self) -> np.ndarray:
-        """``(B, N, L)`` fault labels v1 of the pending measurements (``labels.py``; privileged)."""
-        return self.core.pending_label_v1
+    def pending_error_labels(self) -> np.ndarray:
+        """``(B, N, L)`` error labels of the pending measurements (``labels.py``; privileged: the oracle's)."""
+        return self.core.pending_error_label
 
     def pending_systematic_sigmas(self) -> np.ndarray:
         """``(B, N, L)`` the pending measurements' systematic error in units of σ_eff (privileged)."""

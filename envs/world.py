@@ -68,9 +68,12 @@ class SenseBuffers:
         imu: ``(B, N, 3)`` accelerometer reading for the last interval [m/s²].
         z: ``(B, N, L, 3)`` measurements (ranges in component 0).
         valid: ``(B, N, L)`` measurement present.
-        label: ``(B, N, L)`` ground-truth fault label (v0: the v0 metrics and ``oracle-v0`` read it).
+        label: ``(B, N, L)`` injected-fault label: the channel carries a fault the scenario
+            injected (a range error above ``world_kernel.INJECTED_FAULT_SIGMAS`` nominal σ, a
+            drifting GPS fix, a peer link to an IMU-faulty neighbour); what the detection
+            metrics count (``anomaly_detection_rate``, ``fault_rmse`` without a fault window).
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
-        label_v1: ``(B, N, L)`` labels v1 of the measurement's own systematic error
+        error_label: ``(B, N, L)`` error label of the measurement's own systematic error
             (``labels.py``; the link-trust core adds the neighbour-estimate part of peer links).
         systematic: ``(B, N, L, 3)`` signed systematic error: range bias in component 0, GPS
             drift + heavy-tail excess per axis, zeros for landmarks and relative positions [m].
@@ -86,7 +89,7 @@ class SenseBuffers:
     valid: np.ndarray
     label: np.ndarray
     injected: np.ndarray
-    label_v1: np.ndarray
+    error_label: np.ndarray
     systematic: np.ndarray
     velocity: np.ndarray | None = None
 
@@ -111,7 +114,7 @@ class World:
         self.spec = spec
         self.batch_size = batch_size
         self.layout: ChannelLayout = build_layout(spec)
-        #: ``(N, L)`` labels v1 threshold per channel (``labels.label_thresholds``)
+        #: ``(N, L)`` error-label threshold per channel (``labels.label_thresholds``)
         self.label_threshold = label_thresholds(self.layout.kind)
         self.anchors = np.asarray(spec.anchors, dtype=float).reshape(-1, 3)
         self.landmarks = np.asarray(spec.landmarks, dtype=float).reshape(-1, 3)
@@ -137,11 +140,11 @@ class World:
             imu_const_bias=per_uav(), velocity_bias=per_uav(), gm_bias=per_channel(), gm_left=per_channel(),
             pos=per_uav(), vel=per_uav(), acc=per_uav(), imu=per_uav(), z=np.zeros((n_b, n, n_l, 3)),
             valid=per_channel(np.bool_), label=per_channel(np.bool_), injected=per_channel(),
-            systematic=np.zeros((n_b, n, n_l, 3)), label_v1=per_channel(np.bool_), velocity=per_uav(),
+            systematic=np.zeros((n_b, n, n_l, 3)), error_label=per_channel(np.bool_), velocity=per_uav(),
         )
         w = self.inputs
         self.buffers = SenseBuffers(pos=w.pos, vel=w.vel, imu=w.imu, z=w.z, valid=w.valid, label=w.label,
-                                    injected=w.injected, label_v1=w.label_v1, systematic=w.systematic,
+                                    injected=w.injected, error_label=w.error_label, systematic=w.systematic,
                                     velocity=w.velocity if w.has_velocity else None)
         self._everyone = np.ones(n_b, dtype=np.bool_)
         self._sense = sense_kernel(n_b)

@@ -30,7 +30,8 @@ from .labels import own_sigmas
 from .rng import Stream, normal_at, stream_key, student_t_at, uniform_at
 from .trajectories import truth_at
 
-LABEL_SIGMAS = 3.0  # labels v0: an injected error above this many nominal σ is labelled a fault
+#: injected-fault label (``SenseBuffers.label``): a range error above this many nominal σ is a fault
+INJECTED_FAULT_SIGMAS = 3.0
 
 
 class WorldInputs(NamedTuple):
@@ -52,7 +53,7 @@ class WorldInputs(NamedTuple):
         camera_fov_cos: cosine of half the camera's field of view; the camera looks along the
             UAV's velocity (−1: omnidirectional, every landmark in range is seen).
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
-        label_threshold: ``(N, L)`` labels v1 threshold on the systematic error in σ_eff
+        label_threshold: ``(N, L)`` error-label threshold on the systematic error in σ_eff
             (``labels.label_thresholds``).
 
     Episode state (changed by ``reset_episodes`` and ``sense_episodes``):
@@ -64,11 +65,11 @@ class WorldInputs(NamedTuple):
     Step buffers (written by ``sense_episodes`` for step k):
         pos, vel, acc: ``(B, N, 3)`` truth [m, m/s, m/s²].
         imu: ``(B, N, 3)`` accelerometer reading for the interval (k−1, k] [m/s²].
-        z: ``(B, N, L, 3)`` measurements; valid, label ``(B, N, L)`` bool present / faulty.
+        z: ``(B, N, L, 3)`` measurements; valid, label ``(B, N, L)`` bool present / injected fault.
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
         systematic: ``(B, N, L, 3)`` signed systematic error of the measurement (``labels.py``):
             range bias in component 0, GPS drift + heavy-tail excess per axis, 0 otherwise [m].
-        label_v1: ``(B, N, L)`` bool labels v1 of the measurement's own error (present and
+        error_label: ``(B, N, L)`` bool error label of the measurement's own error (present and
             ``own_sigmas > label_threshold``; the core adds the neighbour-estimate part).
         velocity: ``(B, N, 3)`` visual-odometry velocity [m/s] (zeros without the sensor).
     """
@@ -105,7 +106,7 @@ class WorldInputs(NamedTuple):
     label: np.ndarray
     injected: np.ndarray
     systematic: np.ndarray
-    label_v1: np.ndarray
+    error_label: np.ndarray
     velocity: np.ndarray
 
 
@@ -182,7 +183,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     # The arrays are bound once: numba reference-counts every array read from a named tuple,
     # with an atomic operation, and keeps the pair when the read sits in a branch.
     pos, vel, acc, imu, z, velocity = w.pos, w.vel, w.acc, w.imu, w.z, w.velocity
-    valid, label, injected, systematic, label_v1 = w.valid, w.label, w.injected, w.systematic, w.label_v1
+    valid, label, injected, systematic, error_label = w.valid, w.label, w.injected, w.systematic, w.error_label
     anchors, landmarks, traj_prm = w.anchors, w.landmarks, w.traj_prm
     kind, target, linked, sigma, label_threshold = w.kind, w.target, w.linked, w.sigma, w.label_threshold
     seeds, steps, imu_const_bias, velocity_bias, gm_bias, gm_left = (w.seeds, w.steps, w.imu_const_bias,
@@ -314,7 +315,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                     systematic[b, i, l, 0] = err
                     systematic[b, i, l, 1] = 0.0
                     systematic[b, i, l, 2] = 0.0
-                    lab = err > LABEL_SIGMAS * sg
+                    lab = err > INJECTED_FAULT_SIGMAS * sg
                     if ch == PEER:
                         lab = lab or _imu_faulty(imu_time, imu_nodes, b, j, t)
                 elif ch == LANDMARK:
@@ -389,7 +390,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                 valid[b, i, l] = ok
                 label[b, i, l] = lab and ok
                 injected[b, i, l] = err
-                label_v1[b, i, l] = ok and own_sigmas(ch, systematic[b, i, l, 0], systematic[b, i, l, 1],
+                error_label[b, i, l] = ok and own_sigmas(ch, systematic[b, i, l, 0], systematic[b, i, l, 1],
                                                       systematic[b, i, l, 2], sg) > label_threshold[i, l]
 
 
@@ -447,7 +448,7 @@ def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, veloc
         w.z[b] = 0.0
         w.injected[b] = 0.0
         w.systematic[b] = 0.0
-        w.label_v1[b] = False
+        w.error_label[b] = False
         w.valid[b] = False
         w.label[b] = False
         w.gm_bias[b] = 0.0

@@ -85,7 +85,7 @@ def _score_tip(board: SuiteBoard, standing: Standing) -> str | None:
     """Hover text of a 2^S cell; for partial coverage, how the best ranked method does on the same tasks."""
     score = standing.score
     if score is None:
-        return "no score v1: no uniform_rmse in the results and no stored uniform entry for this suite"
+        return "no score: no uniform_rmse in the results and no stored uniform entry for this suite"
     tip = f"S = {score.S:.3f}, IQM of the gains {score.iqm:.3f}"
     if standing.full or standing.entry.privileged:
         return tip
@@ -101,7 +101,7 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
     n = len(board.tasks)
     heads: list[tuple[str, str, str]] = []  # (label, sort type, title)
     if ranked:
-        heads.append(("#", "number", "rank by score v1 (S). In the ranked table: 1 + the methods ahead beyond doubt "
+        heads.append(("#", "number", "rank by the score (S). In the ranked table: 1 + the methods ahead beyond doubt "
                                      "(paired 95% CI of the difference in S above 0); a shared # is a tie the seeds "
                                      "cannot break"))
     heads += [
@@ -115,7 +115,6 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
     ]
     heads += [(c.header, "number", f"× uniform over {c.title}; hover a cell for its worst task") for c in columns]
     heads += [
-        ("v0 score", "number", "mean normalized score v0 (0 = uniform, 1 = oracle v0)"),
         ("Delay [ms]", "number", "mean computation delay per step"),
         ("Energy [J]", "number", "mean energy per episode"),
         ("Jitter", "number", "mean |Δ trust| per step"),
@@ -144,7 +143,6 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
             _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
             _num_cell(k, f"{k}/{n}"),
             *(_column_cell(standing, c) for c in columns),
-            _num_cell(entry.score.mean if entry.score else None, fmt(entry.score.mean if entry.score else None)),
             _num_cell(entry.delay_ms, fmt(entry.delay_ms, 2)),
             _num_cell(entry.energy_j, fmt(entry.energy_j, 3)),
             _num_cell(entry.jitter, fmt(entry.jitter, 4)),
@@ -177,7 +175,7 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
     generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     parts = [
         "<header><h1>swarmloc leaderboard</h1>",
-        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by score v1: 2^S, how many "
+        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by 2^S, how many "
         "times lower the position error is than the standard CEKF's (uniform trust), the geometric mean "
         "over the suite's tasks, with a stratified-bootstrap 95% CI. Family columns give × uniform over "
         "the family's tasks (hover for the worst task). Click a column header to sort.</p></header>",
@@ -244,7 +242,7 @@ def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | 
 
 def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
                  explanation: str = "") -> str:
-    entry, v1 = standing.entry, standing.score
+    entry, score = standing.entry, standing.score
     results = json.loads(entry.results_json)
     prov = results.get("provenance", {})
     machine = prov.get("machine", {})
@@ -253,7 +251,6 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
         f"<a href=\"{_e(url)}\" rel=\"nofollow noopener noreferrer\">{_e(url)}</a>"
         if url and url.startswith(("http://", "https://")) else "—"
     )
-    score = entry.score
     about = _definition_rows([
         ("Authors", _e(entry.authors or "—")),
         ("URL", url_html),
@@ -266,12 +263,9 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
         ("Weights SHA-256", f"<code>{_e(entry.weights_sha256 or '—')}</code>"),
         ("Suite", _e(f"{entry.suite_name} v{entry.suite_version} ({entry.suite_sha256[:12]}…)")),
         ("Submitted", _e(entry.created_utc.strftime("%Y-%m-%d %H:%M UTC"))),
-        ("Score v1", _e("—" if v1 is None else
-                        f"{fmt_score(v1)}× lower error than uniform (S = {v1.S:.3f}; IQM of the gains "
-                        f"{v1.iqm:.3f}; gap closed {fmt_pct(v1.gap_closed)}; {len(v1.tasks)}/{n_tasks} tasks)")),
-        ("Normalized score (v0)",
-         _e("—" if score is None else
-            f"{score.mean:.3f} (IQM {score.iqm:.3f}, 95% CI [{score.ci_low:.3f}, {score.ci_high:.3f}])")),
+        ("Score", _e("—" if score is None else
+                     f"{fmt_score(score)}× lower error than uniform (S = {score.S:.3f}; IQM of the gains "
+                     f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")),
     ])
     provenance = _definition_rows([
         ("swarmloc version", _e(prov.get("package_version", "—"))),
@@ -291,7 +285,7 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
     )
     body_rows = []
     for task in sorted(entry.task_aggregates):
-        t = v1.tasks.get(task) if v1 else None
+        t = score.tasks.get(task) if score else None
         cells = [
             _num_cell(None if t is None else 2.0**t.mean, "—" if t is None else fmt_times(2.0**t.mean),
                       None if t is None else f"G_t = {t.mean:.3f} (mean log2 gain over {t.gains.size} seeds)"),

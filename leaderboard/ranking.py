@@ -1,6 +1,6 @@
-"""Ranking by score v1, shared by the leaderboard views.
+"""Ranking by the score, shared by the leaderboard views.
 
-Per suite (name and version) every entry is scored with score v1
+Per suite (name and version) every entry is scored
 (:func:`swarmloc.bench.evaluation.score.suite_score`, ``docs/scoring.md``): ``S`` = mean
 over tasks of the mean per-episode gain ``log2(RMSE_uniform / RMSE)``, shown as ``2^S``.
 Entries then fall into three tables:
@@ -8,7 +8,7 @@ Entries then fall into three tables:
 * **ranked** — non-privileged methods that cover every task of the suite, by S (best first);
 * **partial** — non-privileged methods that cannot run some tasks (null RMSE there), ranked
   apart by S over the tasks they cover (``k/T``), so they are compared only on those tasks;
-  entries with no score at all come last, in v0 order (mean normalized score), then by age;
+  entries with no score at all come last, by age;
 * **privileged** — methods that read ground truth (the oracle): shown apart, not ranked.
 
 Ties go to the higher IQM of the gains, then to the older submission.
@@ -19,7 +19,7 @@ doubt: the 95 % CI of their paired difference in S (same tasks, same seeds; stra
 bootstrap) lies above 0 (:func:`swarmloc.bench.evaluation.score.separable_ranks`). The views
 show it as the rank; methods that share it are not told apart by the suite.
 
-**The uniform fallback.** Score v1 needs ``uniform_rmse`` per episode (results schema 2). A
+**The uniform fallback.** The score needs ``uniform_rmse`` per episode (results schema 2). A
 results file without it (schema 1, e.g. the shipped standard-v0 results until they are
 regenerated) takes it from the suite's stored ``uniform`` entry (entry point ``uniform``,
 trusted before verified before older): the RMSE of uniform trust on the same (task, seed),
@@ -54,7 +54,8 @@ class Standing:
 
     Attributes:
         entry: the stored submission.
-        score: its score v1 (None when no task has a gain: no ``uniform_rmse`` and no reference).
+        score: its score (None when no task has a gain: no ``uniform_rmse`` and no reference); the
+            entry's own ``score`` (``records.EntryScore``) is the same without the uniform fallback.
         rank: 1-based place in its table (None for privileged methods).
         filled: episodes whose ``uniform_rmse`` came from the suite's ``uniform`` entry.
         separable_rank: in the ranked table, 1 + the ranked methods ahead of it beyond doubt
@@ -161,8 +162,7 @@ def fill_uniform_rmse(episodes: Sequence[Mapping[str, Any]],
 
 def _order_key(standing: Standing) -> tuple[Any, ...]:
     s, e = standing.score, standing.entry
-    return (s is None, -(s.S if s else 0.0), -(s.iqm if s else 0.0),
-            -(e.score.mean if e.score else -np.inf), e.created_utc, e.id or 0)
+    return (s is None, -(s.S if s else 0.0), -(s.iqm if s else 0.0), e.created_utc, e.id or 0)
 
 
 def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry]) -> SuiteBoard:

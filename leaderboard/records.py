@@ -4,14 +4,18 @@ Tables (generic SQLAlchemy types only, so SQLite and PostgreSQL share one schema
 
 * ``swarmloc_schema_version`` — one row, the schema version (see ``store.MIGRATIONS``);
 * ``submissions`` — one row per accepted submission, unique on
-  (method hash, suite name, suite version), with the submitted results file verbatim;
+  (method hash, suite name, suite version), with the submitted results file verbatim and
+  its score (``score_mean`` is S, the mean over tasks of the per-task gain; ``score_iqm``
+  the IQM of the episodes' gains; ``score_ci_*`` the 95 % CI of S);
 * ``task_aggregates`` — mean, IQM and CI per (submission, task, metric).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from typing import Any
 
 from sqlalchemy import (
     BigInteger,
@@ -107,13 +111,51 @@ class TaskAggregateRow(Base):
 
 
 @dataclass(frozen=True)
+class EntryScore:
+    """The score of a submission's own episodes (``swarmloc.bench.evaluation.score``, docs/scoring.md).
+
+    The same score the boards rank by (``ranking.Standing.score``), which also fills a missing
+    ``uniform_rmse`` from the suite's ``uniform`` entry; here only the file's episodes count.
+
+    Attributes:
+        S: mean over the covered tasks of the mean gain log2(RMSE_uniform / RMSE) (log2 units).
+        ci_low, ci_high: its stratified-bootstrap 95 % CI.
+        iqm: interquartile mean of the covered episodes' gains.
+    """
+
+    S: float
+    ci_low: float
+    ci_high: float
+    iqm: float
+
+    @property
+    def times(self) -> float:
+        """``2^S``: how many times lower the error is than uniform's."""
+        return 2.0**self.S
+
+    @property
+    def times_ci(self) -> tuple[float, float]:
+        """The CI of ``2^S``."""
+        return 2.0**self.ci_low, 2.0**self.ci_high
+
+    @classmethod
+    def of(cls, episodes: Iterable[Mapping[str, Any]]) -> EntryScore | None:
+        """The score of results-file episodes (``{"task", "seed", "metrics"}``; tasks in the order they
+        appear); None when no task has a gain (no ``uniform_rmse``, or no episode the method ran)."""
+        from swarmloc.bench.evaluation.score import suite_score  # local: numpy, only when scoring
+
+        s = suite_score(episodes)
+        return None if s is None else cls(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, iqm=s.iqm)
+
+
+@dataclass(frozen=True)
 class LeaderboardEntry:
     """A stored submission, as views read it.
 
-    ``score`` is the mean normalized score over all (task, seed) runs with its IQM and
-    task-stratified 95 % CI; ``delay_ms``, ``energy_j``, ``jitter`` are means over all
-    runs; ``task_aggregates[task][metric]`` holds per-task statistics (undefined metrics
-    absent). ``results_json`` is the submitted results file, byte for byte.
+    ``score`` is the score of the submitted episodes (:class:`EntryScore`: S with its IQM of
+    the gains and task-stratified 95 % CI); ``delay_ms``, ``energy_j``, ``jitter`` are means
+    over all runs; ``task_aggregates[task][metric]`` holds per-task statistics (undefined
+    metrics absent). ``results_json`` is the submitted results file, byte for byte.
     """
 
     name: str
@@ -133,7 +175,7 @@ class LeaderboardEntry:
     trusted: bool
     verification_seed: int | None
     verified_episodes: int
-    score: Aggregate | None
+    score: EntryScore | None
     delay_ms: float | None
     energy_j: float | None
     jitter: float | None
@@ -150,4 +192,4 @@ class LeaderboardEntry:
         return sorted(self.task_aggregates)
 
 
-__all__ = ["Base", "LeaderboardEntry", "SchemaVersionRow", "SubmissionRow", "TaskAggregateRow"]
+__all__ = ["Base", "EntryScore", "LeaderboardEntry", "SchemaVersionRow", "SubmissionRow", "TaskAggregateRow"]

@@ -31,7 +31,7 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
-from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results, score_v1
+from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results, score_block
 from swarmloc.bench.evaluation.stats import aggregate
 from swarmloc.leaderboard.entry_points import (
     EntryPoint,
@@ -56,7 +56,7 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
     "cep90": (0.0, math.inf),
     "fault_rmse": (0.0, math.inf),
     "healthy_rmse": (0.0, math.inf),
-    "uniform_rmse": (0.0, math.inf),  # the standard CEKF on the same episode (score v1's reference)
+    "uniform_rmse": (0.0, math.inf),  # the standard CEKF on the same episode (the score's reference)
     "bound_rmse": (0.0, math.inf),  # the episode's information bound
     # Seconds after an IMU fault ends (censored at the episode's end), and a flag per episode.
     "recovery_s": (0.0, math.inf),
@@ -70,9 +70,8 @@ METRIC_BOUNDS: dict[str, tuple[float, float]] = {
     "jitter": (0.0, 1.0),
     "weight_var": (0.0, 1.0),
     "anomaly_detection_rate": (0.0, 1.0),
-    # Returns and normalized scores may be any finite number.
+    # Returns may be any finite number.
     "team_return": (-math.inf, math.inf),
-    "normalized_score": (-math.inf, math.inf),
 }
 """Closed physical range of every metric (non-finite values are always rejected)."""
 
@@ -276,12 +275,12 @@ def coverage_problems(results: Results) -> list[str]:
 
 
 def score_problems(results: Results) -> list[str]:
-    """A ``score`` block (score v1) that disagrees with the episodes (the leaderboard recomputes it anyway)."""
+    """A ``score`` block that disagrees with the episodes (the leaderboard recomputes it anyway)."""
     if results.score is None:
         return []
-    expected = score_v1(results.episodes, list(results.aggregates))
+    expected = score_block(results.episodes, list(results.aggregates))
     if expected is None:
-        return ["the results file has a score v1 block, but its episodes give none (no uniform_rmse)"]
+        return ["the results file has a score block, but its episodes give none (no uniform_rmse)"]
     problems = []
     for name in ("S", "iqm", "times"):
         a, b = getattr(results.score, name), getattr(expected, name)

@@ -28,7 +28,6 @@ RESULTS_DIR = Path(__file__).resolve().parent / "results"
 RESULTS_DIRS: dict[str, Path] = {DEFAULT_SUITE: RESULTS_DIR / DEFAULT_SUITE, "standard-v0": RESULTS_DIR}
 #: shipped reference methods without standard-v1 results, and why (every other one has them)
 WITHOUT_V1_RESULTS: dict[str, str] = {
-    "oracle-v0": "the oracle of fault labels v0, the reference of the frozen v0 score (standard-v0 only)",
     "ci-ekf": "anchor-free (dtvirm): every standard-v1 task has absolute references, so it runs none of them "
               "(it runs AnchorFree-v0)",
     "ci-ekf-no-aa": "as ci-ekf",
@@ -134,7 +133,7 @@ def regenerate(methods: list[str], suite_name: str = DEFAULT_SUITE, workers: int
     """Re-evaluate ``methods`` on a suite into its shipped results folder (traces are not kept).
 
     All methods run in one evaluation, so the references every episode needs (uniform, the
-    oracles, the information bound) are computed once per worker, not once per method.
+    information bound) are computed once per worker, not once per method.
     """
     from swarmloc.bench.evaluation.results import write_results
     from swarmloc.bench.evaluation.runner import evaluate_methods

@@ -105,7 +105,7 @@ def plot_scores(board: SuiteBoard, path: Path) -> Path:
         ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         ax.xaxis.set_minor_formatter(ticker.NullFormatter())
     ax.set_xlabel("2^S: × lower error than uniform (geometric mean over tasks; 95% CI)")
-    ax.set_title(f"{board.name} v{board.version} — score v1", fontsize=10)
+    ax.set_title(f"{board.name} v{board.version} — score (2^S)", fontsize=10)
     ax.grid(axis="x", alpha=0.3, which="both")
     return _save(fig, path)
 
@@ -199,7 +199,7 @@ def suite_plots(board: SuiteBoard, out_dir: Path) -> list[SitePlot]:
         return []
     out_dir.mkdir(parents=True, exist_ok=True)
     plots = [
-        SitePlot(plot_scores(board, out_dir / "score.png"), "score v1 per method with 95% CI",
+        SitePlot(plot_scores(board, out_dir / "score.png"), "score per method with 95% CI",
                  "2^S per method with its stratified-bootstrap 95% CI (uniform = 1, dashed). Ranked methods "
                  "first, then partial coverage (k/T: over the covered tasks only), then privileged methods."),
     ]

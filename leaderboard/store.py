@@ -27,6 +27,7 @@ The test suite runs the same store tests on SQLite and on a throwaway PostgreSQL
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import time
@@ -36,7 +37,7 @@ from datetime import timezone
 from pathlib import Path
 from typing import Any, TypeVar
 
-from sqlalchemy import create_engine, event, func, inspect, select
+from sqlalchemy import create_engine, delete, event, func, inspect, select, update
 from sqlalchemy.engine import Connection, Engine, make_url
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session
@@ -45,6 +46,7 @@ from swarmloc.bench.evaluation.results import Aggregate
 from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError
 from swarmloc.leaderboard.records import (
     Base,
+    EntryScore,
     LeaderboardEntry,
     SchemaVersionRow,
     SubmissionRow,
@@ -54,10 +56,32 @@ from swarmloc.leaderboard.records import (
 ENV_VAR: str = "SWARMLOC_DB"
 """Environment variable naming the store's database URL."""
 
-SCHEMA_VERSION: int = 1
-"""Schema version written by this code."""
+SCHEMA_VERSION: int = 2
+"""Schema version written by this code.
 
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {}
+History: 1 — the ``score_*`` columns hold the retired normalized score (mean over all runs);
+2 — they hold the score (``records.EntryScore``: S, its CI, the IQM of the gains), and the
+retired metric has no per-task aggregates.
+"""
+
+
+def _rescore(conn: Connection) -> None:
+    """1 → 2: recompute every submission's score from its stored results file, and drop the
+    per-task aggregates of the retired ``normalized_score``."""
+    rows = SubmissionRow.__table__
+    for row_id, text in conn.execute(select(rows.c.id, rows.c.results_json)).all():
+        try:
+            score = EntryScore.of(json.loads(text)["episodes"])
+        except (ValueError, KeyError, TypeError):  # not a results file (a test's stub): no score
+            score = None
+        conn.execute(update(rows).where(rows.c.id == row_id).values(
+            score_mean=score.S if score else None, score_iqm=score.iqm if score else None,
+            score_ci_low=score.ci_low if score else None, score_ci_high=score.ci_high if score else None))
+    aggregates = TaskAggregateRow.__table__
+    conn.execute(delete(aggregates).where(aggregates.c.metric == "normalized_score"))
+
+
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _rescore}
 """``from_version -> upgrade(connection)`` bringing a store from ``v`` to ``v + 1``.
 
 Add an entry (and bump :data:`SCHEMA_VERSION`) whenever the tables change; each step
@@ -67,7 +91,7 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 
 _SHIPPED_TRACK_A: tuple[str, ...] = (
     "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "non-cooperative",
-    "random", "oracle", "oracle-v0",
+    "random", "oracle",
     "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only", "mappo-set-gru",
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (
@@ -287,7 +311,7 @@ class LeaderboardStore:
                                                                     "score_ci_low", "score_ci_high")}
         score = entry.score
         values.update(
-            score_mean=score.mean if score else None,
+            score_mean=score.S if score else None,
             score_iqm=score.iqm if score else None,
             score_ci_low=score.ci_low if score else None,
             score_ci_high=score.ci_high if score else None,
@@ -332,8 +356,8 @@ class LeaderboardStore:
             )
         score = None
         if row.score_mean is not None:
-            score = Aggregate(
-                mean=row.score_mean,
+            score = EntryScore(
+                S=row.score_mean,
                 iqm=row.score_iqm if row.score_iqm is not None else row.score_mean,
                 ci_low=row.score_ci_low if row.score_ci_low is not None else row.score_mean,
                 ci_high=row.score_ci_high if row.score_ci_high is not None else row.score_mean,
@@ -409,6 +433,7 @@ __all__ = [
     "MIGRATIONS",
     "SCHEMA_VERSION",
     "SHIPPED_REFERENCE_METHODS",
+    "EntryScore",
     "LeaderboardEntry",
     "LeaderboardStore",
     "default_db_url",

@@ -13,8 +13,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from swarmloc.bench.evaluation.stats import aggregate, aggregate_across_tasks
+from swarmloc.bench.evaluation.stats import aggregate
 from swarmloc.leaderboard.errors import InvalidSubmission
+from swarmloc.leaderboard.records import EntryScore
 from swarmloc.leaderboard.schema import (
     SizeLimits,
     SubmissionMetadata,
@@ -59,14 +60,15 @@ class SubmissionReceipt:
     def describe(self) -> str:
         """One paragraph for the terminal."""
         score = self.entry.score
-        score_text = "n/a" if score is None else (
-            f"{score.mean:.3f} (IQM {score.iqm:.3f}, 95% CI [{score.ci_low:.3f}, {score.ci_high:.3f}])"
+        score_text = "n/a (no uniform_rmse in the results)" if score is None else (
+            f"{score.times:.2f}× lower error than uniform (95% CI [{score.times_ci[0]:.2f}, "
+            f"{score.times_ci[1]:.2f}]; S = {score.S:.3f})"
         )
         how = "trusted shipped method, not re-run" if self.report is None else self.report.describe()
         return (
             f"stored submission #{self.id} {self.entry.name!r} on suite "
             f"{self.entry.suite_name} v{self.entry.suite_version} in {self.store_url}\n"
-            f"  normalized score {score_text}\n  verification: {how}"
+            f"  score {score_text}\n  verification: {how}"
         )
 
 
@@ -110,7 +112,7 @@ def build_entry(
         trusted=trusted,
         verification_seed=None if report is None else report.sample_seed,
         verified_episodes=0 if report is None else len(report.episodes),
-        score=aggregate_across_tasks(results.episodes, "normalized_score"),
+        score=EntryScore.of(e.model_dump() for e in results.episodes),
         delay_ms=_mean_metric(validated, "delay_ms"),
         energy_j=_mean_metric(validated, "energy_j"),
         jitter=_mean_metric(validated, "jitter"),

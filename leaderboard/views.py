@@ -1,6 +1,6 @@
 """Views of the store: a terminal table, the static HTML site, CSV/JSON exports.
 
-Methods are ranked per suite by score v1 (``2^S``: how many times lower the error is than
+Methods are ranked per suite by the score (``2^S``: how many times lower the error is than
 the standard CEKF's, with its 95 % CI), beside the gap closed towards the information bound
 and the task coverage ``k/T``; partial coverage is ranked in its own table and privileged
 methods (those that read ground truth) are shown apart, not ranked (see
@@ -170,12 +170,12 @@ def board_tables(board: SuiteBoard, family: str | None = None,
     n = len(board.tasks)
     suite = f"{board.name} v{board.version}"
     # titles as their own lines: a table title would wrap at the (narrower) table's width
-    out: list[Table | Text] = [Text(f"swarmloc leaderboard — suite {suite} (ranked by score v1, 2^S; covering all "
+    out: list[Table | Text] = [Text(f"swarmloc leaderboard — suite {suite} (ranked by 2^S; covering all "
                                     f"{n} tasks)", style="bold")]
     if board.ranked:
         out.append(_rich_table(board.ranked, columns, n, ranked=True, coverage=False))
     else:
-        out.append(Text("No ranked methods: none has a score v1 on every task of the suite.", style="italic"))
+        out.append(Text("No ranked methods: none has a score on every task of the suite.", style="italic"))
     if board.partial:
         out += [Text(f"Partial coverage on {suite} (ranked apart; 2^S over the covered tasks only)", style="bold"),
                 _rich_table(board.partial, columns, n, ranked=True)]
@@ -240,7 +240,6 @@ def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
             for standing in standings:
                 entry, score = standing.entry, standing.score
                 k, n = standing.coverage(len(board.tasks))
-                v0 = entry.score
                 row: dict[str, Any] = {
                     "id": entry.id,
                     "suite": entry.suite_name,
@@ -266,10 +265,6 @@ def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
                     "tasks_covered": k,
                     "tasks_total": n,
                     "uniform_rmse_filled": standing.filled,
-                    "v0_score_mean": v0.mean if v0 else None,
-                    "v0_score_iqm": v0.iqm if v0 else None,
-                    "v0_score_ci_low": v0.ci_low if v0 else None,
-                    "v0_score_ci_high": v0.ci_high if v0 else None,
                     "delay_ms": entry.delay_ms,
                     "energy_j": entry.energy_j,
                     "jitter": entry.jitter,
@@ -301,9 +296,9 @@ def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | N
     One row per submission, in board order: suite, rank (empty outside the ranked table),
     metadata, ``table`` (``ranked``, ``partial`` or ``privileged``), ``partial_rank`` and
     ``separable_rank`` (1 + the ranked methods ahead beyond doubt; empty outside the ranked table),
-    score v1 (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
+    the score (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
     ``tasks_covered``/``tasks_total``, ``uniform_rmse_filled`` — episodes scored through the
-    uniform fallback), the v0 normalized score (``v0_score_*``), mean delay/energy/jitter,
+    uniform fallback), mean delay/energy/jitter,
     per task ``times[<task>]`` (2^G_t), ``gap_closed[<task>]`` and the mean RMSE
     ``rmse[<task>]``, entry point, method hash, submission time. JSON rows also carry
     ``task_aggregates`` (every metric's mean, IQM and CI per task). Text cells in CSV

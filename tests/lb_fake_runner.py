@@ -43,7 +43,6 @@ def metrics_for(task: str, seed: int) -> dict[str, float | None]:
         "weight_var": 0.1 * u[4],
         "anomaly_detection_rate": None,
         "team_return": 300.0 + 100.0 * u[5],
-        "normalized_score": u[6] - 0.2,
     }
 
 
@@ -96,3 +95,10 @@ def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | No
         factory = getattr(importlib.import_module(module_name), attr)
         factory(weights=weights) if weights else factory()
     return [{"task": t, "seed": s, "metrics": metrics_for(t, s)} for t, s in episodes]
+
+
+def run_episodes_with_reference(method: str, episodes: list[tuple[str, int]],
+                                weights: str | None = None) -> list[dict]:
+    """As :func:`run_episodes`, and every episode carries ``uniform_rmse`` (= its RMSE: a gain of 0)."""
+    return [{**e, "metrics": {**e["metrics"], "uniform_rmse": e["metrics"]["rmse"]}}
+            for e in run_episodes(method, episodes, weights)]

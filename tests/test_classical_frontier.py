@@ -248,7 +248,7 @@ def test_faulty_nodes_recover_with_cusum_and_raim_but_not_chi2_gate(cascaded):
 def _hand_nis(core: LinkTrustCore, with_neighbour: bool) -> np.ndarray:
     """The pending NIS of every peer channel from the core's priors, by the formulas of docs/world.md."""
     lay, buf = core.layout, core.world.buffers
-    out = np.full(core.pending_label_v1.shape, np.nan)
+    out = np.full(core.pending_error_label.shape, np.nan)
     for b in range(core.batch_size):
         for i in range(core.n_uav):
             for l in range(core.n_channels):

@@ -153,7 +153,9 @@ def test_demo_tables(tmp_path):
     assert "| chi2-soft | A |" in md and md.rstrip().splitlines()[-1].startswith("| oracle† |")
     assert sorted(p.name for p in (tmp_path / "results").glob("*.json")) == ["chi2-soft.json", "oracle.json",
                                                                             "uniform.json"]
-    assert results["chi2-soft"].aggregates["swarmloc/NLOSStep-v0"]["normalized_score"].mean > 0.9
+    score = results["chi2-soft"].score
+    assert score is not None and score.times > 1.0  # chi2-soft beats uniform on NLOSStep
+    assert "normalized_score" not in results["chi2-soft"].aggregates["swarmloc/NLOSStep-v0"]
 
 
 def test_plot_command_draws_every_channel_kind(tmp_path):

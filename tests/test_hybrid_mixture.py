@@ -1,5 +1,5 @@
 """Hybrid GPS noise as a contamination mixture (``HybridNoise(model="mixture")``, the v1 tasks):
-the draws' statistics, kernel == a readable transcription, batched == single, labels v1 of the
+the draws' statistics, kernel == a readable transcription, batched == single, error labels of the
 Student-t draws, and the v0 weighted sum left bit for bit as it was."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pydantic
 import pytest
 
 from swarmloc.envs.channels import GPS
-from swarmloc.envs.labels_reference import own_labels_v1_reference
+from swarmloc.envs.labels_reference import own_error_labels_reference
 from swarmloc.envs.rng import Stream, normal, uniform
 from swarmloc.envs.specs import HybridNoise
 from swarmloc.envs.tasks import get_spec
@@ -30,7 +30,7 @@ def mixture_spec(ratio: float = 0.3, duration: float = 20.0, **fields):
 
 
 def gps_rollout(spec, seeds):
-    """Every step's GPS noise z − p, systematic error and labels v1: ``(T, B, N, 3)``, …, ``(T, B, N)``."""
+    """Every step's GPS noise z − p, systematic error and error labels: ``(T, B, N, 3)``, …, ``(T, B, N)``."""
     world = World(spec, len(seeds))
     world.reset(seeds)
     gps = world.layout.kind == GPS
@@ -41,11 +41,11 @@ def gps_rollout(spec, seeds):
         buf = world.sense()
         noise.append(buf.z[:, rows, col] - buf.pos)
         systematic.append(buf.systematic[:, rows, col].copy())
-        label.append(buf.label_v1[:, rows, col].copy())
+        label.append(buf.error_label[:, rows, col].copy())
         valid.append(buf.valid[:, rows, col].copy())
-        own = own_labels_v1_reference(world.layout.kind, world.layout.sigma, buf.systematic, buf.valid,
+        own = own_error_labels_reference(world.layout.kind, world.layout.sigma, buf.systematic, buf.valid,
                                       world.inputs.label_threshold)
-        np.testing.assert_array_equal(buf.label_v1, own)  # the world's own-error labels v1 == the reference
+        np.testing.assert_array_equal(buf.error_label, own)  # the world's own-error labels == the reference
     return world, *map(np.array, (noise, systematic, label, valid))
 
 
@@ -73,7 +73,7 @@ def test_weighted_sum_v0_is_unchanged():
     digest = hashlib.sha256()
     for _ in range(spec.n_steps):
         buf = world.sense()
-        for a in (buf.z, buf.systematic, buf.label_v1, buf.label, buf.injected, buf.valid):
+        for a in (buf.z, buf.systematic, buf.error_label, buf.label, buf.injected, buf.valid):
             digest.update(np.ascontiguousarray(a).tobytes())
     gps = world.layout.kind == GPS
     assert buf.z[0][gps][1].tolist() == [20.437273293464568, -5.033686049247929, 9.276604157237653]
@@ -104,7 +104,7 @@ def test_mixture_statistics():
     assert not systematic[:, 0, 0].any()
     leader = noise[:, 0, 0]
     assert abs(leader.std() - 0.1) < 4.0 * 0.1 / math.sqrt(2 * leader.size)
-    # labels v1: only Student-t fixes, those outside the 3σ-equivalent radius (3.76 σ, σ = 1 m)
+    # error labels: only Student-t fixes, those outside the 3σ-equivalent radius (3.76 σ, σ = 1 m)
     assert not label[:, 0, 1:][~heavy].any()
     radius = world.inputs.label_threshold[world.layout.kind == GPS][1:]
     big = np.linalg.norm(systematic[:, 0, 1:], axis=-1) / 1.0 > radius
@@ -152,7 +152,7 @@ def test_batched_equals_single():
         buf = batch.sense()
         for b, world in enumerate(singles):
             one = world.sense()
-            for name in ("z", "systematic", "label_v1", "label", "injected", "valid"):
+            for name in ("z", "systematic", "error_label", "label", "injected", "valid"):
                 assert np.array_equal(getattr(buf, name)[b], getattr(one, name)[0]), (name, b)
 
 

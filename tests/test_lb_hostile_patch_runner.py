@@ -26,11 +26,11 @@ def test_patching_the_runner_changes_nothing_outside_the_method(tmp_path: Path) 
         import swarmloc.bench.evaluation.runner as R
         import swarmloc.leaderboard.verify_worker as W
         R.run_episodes = R.evaluate_task = lambda *a, **k: []
-        M.normalized_score = lambda *a, **k: 0.99
+        M.team_return = lambda *a, **k: 0.99
         W._respond = lambda *a, **k: None
     """)
     done = hostile.submit(entry)
-    hostile.assert_refused(done, "compared with exact equality", "differ", "normalized_score: submitted")
+    hostile.assert_refused(done, "compared with exact equality", "differ", "team_return: submitted")
 
 
 def test_a_forged_response_is_refused(tmp_path: Path) -> None:

@@ -91,28 +91,39 @@ def test_valid_submission_is_accepted_and_ranked(tmp_path: Path) -> None:
         assert [e.name for e in ranked] == ["plain", "worse"]  # equal scores: older first
         assert [e.name for e in privileged] == ["oracle"]
         entry = entries[0]
-        assert entry.score is not None
-        assert entry.score.ci_low <= entry.score.mean <= entry.score.ci_high
+        assert entry.score is None  # no uniform_rmse in these files: no score (the views may fill it in)
         assert sorted(entry.task_aggregates) == list(H.TASKS)
         assert "fault_rmse" not in entry.task_aggregates[H.TASKS[0]]  # undefined metric
         assert entry.results_json == plain.read_text()
         assert entry.verification_seed == 7
 
 
-def test_ranking_orders_by_mean_normalized_score(tmp_path: Path) -> None:
+def test_the_entry_score_is_the_score_the_board_ranks_by(tmp_path: Path) -> None:
+    """``entry.score`` is the score (S, log2 gain over uniform), the one ``Standing.score`` ranks by."""
+    from swarmloc.leaderboard.ranking import suite_board
+
     url = f"sqlite:///{tmp_path / 'lb.db'}"
+    gains = {"low": -0.3, "high": 0.4, "mid": 0.0}
     with LeaderboardStore(url) as store:
-        for name, offset in [("low", -0.3), ("high", 0.4), ("mid", 0.0)]:
+        for name, gain in gains.items():
             path = H.make_results_file(
                 tmp_path / f"{name}.json", f"lb_fake_runner:good_{name}",
-                metrics_edit=lambda t, s, m, o=offset: m.update(
-                    normalized_score=m["normalized_score"] + o),
+                metrics_edit=lambda t, s, m, g=gain: m.update(uniform_rmse=m["rmse"] * 2.0**g),
             )
-            # Verification re-runs the unshifted metrics, so compare with a loose tolerance.
-            submit(path, f"lb_fake_runner:good_{name}", {"name": name, "track": "A"},
-                   **(H.submit_options(url) | {"tolerance": Tolerance(abs=1.0)}), store=store)
+            # The runner re-runs a gain of 0 (uniform_rmse = rmse), so compare with a loose tolerance.
+            options = H.submit_options(url) | {"runner": "lb_fake_runner:run_episodes_with_reference",
+                                               "tolerance": Tolerance(abs=1.0)}
+            receipt = submit(path, f"lb_fake_runner:good_{name}", {"name": name, "track": "A"}, **options,
+                             store=store)
+            assert "normalized" not in receipt.describe() and "lower error than uniform" in receipt.describe()
         ranked, _ = views.split_ranked(store.entries())
         assert [e.name for e in ranked] == ["high", "mid", "low"]
+        board = suite_board("tiny-test", "1", store.entries())
+        for standing in board.ranked:
+            entry = standing.entry
+            assert entry.score is not None and entry.score.S == pytest.approx(gains[entry.name], abs=1e-12)
+            assert (entry.score.S, entry.score.ci_low, entry.score.ci_high, entry.score.iqm) == \
+                (standing.score.S, standing.score.ci_low, standing.score.ci_high, standing.score.iqm)
 
 
 # -- rejections: clear message, store unchanged -------------------------------------------
@@ -466,7 +477,7 @@ def test_terminal_view_and_exports(db_url: str, tmp_path: Path) -> None:
         text = console.export_text()
         assert "seed method" in text and "[bold]oracle[/bold]" in text
         assert text.index("Privileged methods") < text.index("[bold]oracle")
-        # no uniform entry in this store, so no score v1: nothing is ranked (test_leaderboard_views.py ranks)
+        # no uniform entry in this store, so no score: nothing is ranked (test_leaderboard_views.py ranks)
         assert "No ranked methods" in text and text.index("Partial coverage") < text.index("seed method")
         for header in ("2^S", "95% CI", "Gap", "Tasks", "Ideal", "NLOS"):
             assert header in text

@@ -31,15 +31,14 @@ def _build_site(tmp_path: Path) -> Path:
     methods = [("mid", 0.0, False), ("high", 0.4, False), ("low", -0.3, False),
                ("oracle", 0.6, True)]
     with LeaderboardStore(url) as store:
-        # the reference of score v1 (these results files carry no uniform_rmse: the views take it from here)
+        # the reference of the score (these results files carry no uniform_rmse: the views take it from here)
         uniform = H.make_results_file(tmp_path / "uniform.json", "uniform")
         submit(uniform, "uniform", {"name": "uniform", "track": "A"}, trust=True, **H.submit_options(url), store=store)
         for name, offset, privileged in methods:
             entry = f"lb_fake_runner:good_{name}"
             path = H.make_results_file(
                 tmp_path / f"{name}.json", entry, privileged=privileged,
-                metrics_edit=lambda t, s, m, o=offset: m.update(
-                    normalized_score=m["normalized_score"] + o, rmse=m["rmse"] - o / 10),
+                metrics_edit=lambda t, s, m, o=offset: m.update(rmse=m["rmse"] - o / 10),
             )
             # The fake runner reproduces the unshifted metrics; accept the shift here.
             submit(path, entry, {"name": name, "track": "A", "privileged": privileged},
@@ -73,7 +72,7 @@ def test_page_loads_shows_one_row_per_method_and_sorts(tmp_path: Path) -> None:
 
             assert page.title() == "swarmloc leaderboard"
             assert page.locator(f"{ranked} tbody tr").count() == 4  # one row per method
-            # ranked by score v1: "mid" ties uniform (the same RMSE), which is older
+            # ranked by the score: "mid" ties uniform (the same RMSE), which is older
             assert names() == ["high", "uniform", "mid", "low"]
             privileged = page.locator("#privileged-tiny-test-1 tbody tr td:first-child")
             assert privileged.all_inner_texts() == ["oracle"]

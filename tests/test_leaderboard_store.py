@@ -28,7 +28,7 @@ from sqlalchemy.orm import Session
 from swarmloc.bench.evaluation.results import Aggregate
 from swarmloc.leaderboard import store as store_module
 from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError, VerificationFailed
-from swarmloc.leaderboard.records import LeaderboardEntry
+from swarmloc.leaderboard.records import EntryScore, LeaderboardEntry
 from swarmloc.leaderboard.store import LeaderboardStore
 from swarmloc.leaderboard.submit import submit
 
@@ -99,7 +99,7 @@ def _entry(**changes: Any) -> LeaderboardEntry:
         "trusted": False,
         "verification_seed": 2**63 - 1,
         "verified_episodes": 55,
-        "score": Aggregate(mean=0.1 + 0.2, iqm=-1e-300, ci_low=-1.7976931348623157e308, ci_high=5e-324),
+        "score": EntryScore(S=0.1 + 0.2, iqm=-1e-300, ci_low=-1.7976931348623157e308, ci_high=5e-324),
         "delay_ms": 0.013733333333333408,
         "energy_j": 2.2250738585072014e-308,
         "jitter": None,
@@ -291,23 +291,58 @@ def test_two_processes_creating_a_fresh_store_at_once(empty_url: str) -> None:
 
 def test_schema_version_and_migration_path(empty_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
     with LeaderboardStore(empty_url) as store:
-        assert store.schema_version() == store_module.SCHEMA_VERSION == 1
+        assert store.schema_version() == store_module.SCHEMA_VERSION == 2
     applied = []
 
-    def to_v2(conn: Any) -> None:
-        conn.exec_driver_sql("CREATE TABLE probe_v2 (id INTEGER PRIMARY KEY)")
-        applied.append(2)
+    def to_v3(conn: Any) -> None:
+        conn.exec_driver_sql("CREATE TABLE probe_v3 (id INTEGER PRIMARY KEY)")
+        applied.append(3)
 
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(store_module.MIGRATIONS, 1, to_v2)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 3)
+    monkeypatch.setitem(store_module.MIGRATIONS, 2, to_v3)
     with LeaderboardStore(empty_url) as store:
-        assert store.schema_version() == 2 and applied == [2]
+        assert store.schema_version() == 3 and applied == [3]
     with LeaderboardStore(empty_url):  # already upgraded: nothing re-applied
-        assert applied == [2]
-    assert "probe_v2" in dump(empty_url)
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 1)
-    with pytest.raises(StoreError, match=r"schema version 2; this swarmloc supports up to 1"):
+        assert applied == [3]
+    assert "probe_v3" in dump(empty_url)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
+    with pytest.raises(StoreError, match=r"schema version 3; this swarmloc supports up to 2"):
         LeaderboardStore(empty_url)
+
+
+def test_a_version_1_store_is_rescored(empty_url: str, tmp_path: Path) -> None:
+    """1 → 2: the score columns held the retired normalized score; they are recomputed from each stored
+    results file (the score, ``EntryScore``), and the retired metric's per-task aggregates are dropped."""
+    import json
+
+    from sqlalchemy import text
+
+    gain = 0.4
+    path = H.make_results_file(tmp_path / "scored.json", "lb_fake_runner:scored_high",
+                               metrics_edit=lambda t, s, m: m.update(uniform_rmse=m["rmse"] * 2.0**gain))
+    scored = _entry(method_hash="1" * 64, results_json=path.read_text(), score=None)
+    stub = _entry(method_hash="2" * 64)  # a results_json that is not a results file: no score
+    with LeaderboardStore(empty_url) as store:
+        ids = [store.add(scored), store.add(stub)]
+    engine = create_engine(empty_url)
+    try:
+        with engine.begin() as conn:  # what a version-1 store holds: the v0 score and its aggregates
+            conn.execute(text("UPDATE submissions SET score_mean = 0.5, score_iqm = 0.5, score_ci_low = 0.25, "
+                              "score_ci_high = 0.75"))
+            conn.execute(text("INSERT INTO task_aggregates (submission_id, task, metric, mean, iqm, ci_low, ci_high) "
+                              "VALUES (:id, 'swarmloc/Ideal-v0', 'normalized_score', 0.5, 0.5, 0.25, 0.75)"),
+                         {"id": ids[0]})
+            conn.execute(text("UPDATE swarmloc_schema_version SET version = 1"))
+    finally:
+        engine.dispose()
+    with LeaderboardStore(empty_url) as store:
+        assert store.schema_version() == 2
+        rescored, bare = store.get(ids[0]), store.get(ids[1])
+    expected = EntryScore.of(json.loads(path.read_text())["episodes"])
+    assert expected is not None and expected.S == pytest.approx(gain, abs=1e-12)
+    assert rescored.score == expected and bare.score is None
+    assert all("normalized_score" not in per for per in rescored.task_aggregates.values())
+    assert rescored.task_aggregates["swarmloc/Ideal-v0"]
 
 
 def test_a_failed_migration_leaves_the_old_schema(empty_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -318,8 +353,8 @@ def test_a_failed_migration_leaves_the_old_schema(empty_url: str, monkeypatch: p
         conn.exec_driver_sql("CREATE TABLE half_done (id INTEGER PRIMARY KEY)")
         raise RuntimeError("migration bug")
 
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(store_module.MIGRATIONS, 1, broken)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 3)
+    monkeypatch.setitem(store_module.MIGRATIONS, 2, broken)
     with pytest.raises(RuntimeError, match="migration bug"):
         LeaderboardStore(empty_url)
     assert dump(empty_url) == before  # DDL rolled back too (both backends have transactional DDL)

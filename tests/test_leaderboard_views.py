@@ -1,4 +1,4 @@
-"""Leaderboard v1 views: ranking by score v1, partial coverage, the 100-column terminal table,
+"""Leaderboard views: ranking by the score, partial coverage, the 100-column terminal table,
 the exports, the HTML site's plots, task families and method styles.
 
 Entries go straight into a SQLite store (``LeaderboardStore.add``): validation and
@@ -41,7 +41,7 @@ def _entry(name: str, rmse: dict[tuple[str, int], float | None], *, i: int, entr
            track: str = "A") -> LeaderboardEntry:
     """An entry whose results file has these per-episode RMSEs (and uniform/bound RMSEs if given)."""
     episodes = [{"task": t, "seed": s, "metrics": EpisodeMetrics.of(
-        rmse=r, normalized_score=0.0, delay_ms=1.0,
+        rmse=r, delay_ms=1.0,
         uniform_rmse=None if uniform is None else uniform[t, s],
         bound_rmse=None if bound is None else bound[t, s])} for (t, s), r in rmse.items()]
     results = make_results(
@@ -83,7 +83,7 @@ def store(tmp_path: Path) -> LeaderboardStore:
 # -- ranking -------------------------------------------------------------------------
 
 
-def test_ranks_by_score_v1_with_partial_coverage_apart(store: LeaderboardStore) -> None:
+def test_ranks_by_the_score_with_partial_coverage_apart(store: LeaderboardStore) -> None:
     (board,) = suite_boards(store.entries())
     assert board.tasks == TASKS
     assert [(s.rank, s.entry.name) for s in board.ranked] == [(1, "half"), (2, "uniform"), (3, "double")]
@@ -198,7 +198,7 @@ def test_show_command_options(store: LeaderboardStore) -> None:
 # -- exports -------------------------------------------------------------------------
 
 
-def test_exports_carry_score_v1(store: LeaderboardStore) -> None:
+def test_exports_carry_the_score(store: LeaderboardStore) -> None:
     rows = json.loads(views.export(store, "json"))
     assert [(r["name"], r["table"], r["rank"], r["partial_rank"]) for r in rows] == [
         ("half", "ranked", 1, None), ("uniform", "ranked", 2, None), ("double", "ranked", 3, None),
@@ -210,15 +210,17 @@ def test_exports_carry_score_v1(store: LeaderboardStore) -> None:
     assert rows[3]["times[swarmloc/NLOSStep-v0]"] is None
     header = views.export(store, "csv").splitlines()[0]
     assert header.startswith("id,suite,suite_version,rank,name,") and "times_ci_low" in header
+    assert "v0_score" not in header and "normalized" not in header  # the retired score is gone
 
 
 # -- HTML ----------------------------------------------------------------------------
 
 
-def test_site_has_v1_tables_and_suite_plots(store: LeaderboardStore, tmp_path: Path) -> None:
+def test_site_has_the_tables_and_suite_plots(store: LeaderboardStore, tmp_path: Path) -> None:
     site = tmp_path / "site"
     index = views.render_html(store, site, plots=False)
     page = index.read_text()
+    assert "v0 score" not in page and "normalized" not in page.lower()  # the retired score is gone
     for table in ("ranked-tiny-1", "partial-tiny-1", "privileged-tiny-1"):
         assert f'id="{table}"' in page
     assert "worst task: swarmloc/NLOS-v0" in page  # family cells name their worst task on hover

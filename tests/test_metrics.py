@@ -83,17 +83,9 @@ def test_jitter_weight_var_detection():
     assert M.anomaly_detection_rate(np.array([0.1]), np.array([False])) is None
 
 
-def test_team_return_and_normalized_score():
+def test_team_return():
     assert M.team_return(np.array([0.5, 0.25, -1.0])) == pytest.approx(-0.25)
-    # (2 − 1.5) / (2 − 1)
-    assert M.normalized_score(1.5, 2.0, 1.0) == pytest.approx(0.5)
-    assert M.normalized_score(2.0, 2.0, 1.0) == pytest.approx(0.0)
-    assert M.normalized_score(1.0, 2.0, 1.0) == pytest.approx(1.0)
-    assert M.normalized_score(3.0, 2.0, 1.0) == pytest.approx(-1.0)
-    # oracle no better than uniform (by less than 1 mm): undefined
-    assert M.normalized_score(1.0, 2.0, 2.0) is None
-    assert M.normalized_score(1.0, 2.0, 1.9995) is None
-    assert M.normalized_score(1.0, float("nan"), 0.5) is None  # no defined reference, no score
+    assert not hasattr(M, "normalized_score")  # the v0 score is retired
 
 
 def test_channel_stats_equal_pure_functions():

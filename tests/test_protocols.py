@@ -93,15 +93,38 @@ def test_protocols_runtime_checkable():
     assert isinstance(TrustEstimator(load_method("huber").method), Estimator)
 
 
-# ``oracle`` (labels v1) differs between the tracks by design: on Track A its peer labels carry the
+class _InjectedFaultOracle:
+    """A privileged policy on the world's injected-fault labels (``PrivilegedInfo.labels``), the same on
+    both tracks: α_min on a labelled channel, else 1."""
+
+    privileged = True
+    flops_per_channel = 0.0
+
+    def reset(self, batch_size, layout, keys):
+        self._labels = None
+
+    def observe_privileged(self, info: PrivilegedInfo) -> None:
+        self._labels = np.asarray(info.labels, dtype=bool).copy()
+
+    def act(self, inp):
+        return np.where(self._labels, 0.01, 1.0)
+
+
+def _injected_fault_oracle() -> LoadedMethod:
+    return LoadedMethod(name="injected-fault-oracle", entry_point="test", track="A", privileged=True,
+                        deterministic=True, method=_InjectedFaultOracle())
+
+
+# ``oracle`` (error labels) differs between the tracks by design: on Track A its peer labels carry the
 # neighbour's broadcast-estimate error, which only the core knows; on Track B it gets the world's
-# labels v1 of the measurements' own errors (test_track_b_gets_the_world_labels)
-@pytest.mark.parametrize("name", ["chi2-soft", "random", "huber+smooth", "oracle-v0"])
+# error labels of the measurements' own errors (test_track_b_gets_the_world_labels)
+@pytest.mark.parametrize("name", ["chi2-soft", "random", "huber+smooth", "injected-fault-oracle"])
 def test_trust_estimator_equals_the_core(name):
     """A policy gives the same episode through LinkTrustCore (Track A) and TrustEstimator (Track B)."""
     spec = get_spec("swarmloc/NLOS-v0", duration=8.0)
-    core, _ = rollout(load_method(name), spec, SEEDS)
-    loaded = load_method(name)
+    make = _injected_fault_oracle if name == "injected-fault-oracle" else lambda: load_method(name)
+    core, _ = rollout(make(), spec, SEEDS)
+    loaded = make()
     est = _loaded(TrustEstimator(loaded.method), privileged=loaded.privileged)
     track_b, _ = rollout(est, spec, SEEDS)
     for a, b in zip(core, track_b):
@@ -125,21 +148,21 @@ def test_privileged_info_only_for_privileged_methods():
 
 
 def test_track_b_gets_the_world_labels():
-    """A privileged estimator gets labels v0 and the world's labels v1 of the very step it is given."""
+    """A privileged estimator gets the world's injected-fault and error labels of the very step it is given."""
     seen = []
 
     class Spy(DeadReckoning):
         def observe_privileged(self, info: PrivilegedInfo) -> None:
-            seen.append((info.labels.copy(), info.labels_v1.copy(), info.systematic_sigmas))
+            seen.append((info.labels.copy(), info.error_labels.copy(), info.systematic_sigmas))
 
     spec = get_spec("swarmloc/NLOS-v0", duration=3.0)
     rollout(_loaded(Spy(), privileged=True), spec, SEEDS)
     world = World(spec, len(SEEDS))
     world.reset(SEEDS)
-    for v0, v1, sigmas in seen:
+    for injected, error, sigmas in seen:
         buf = world.sense()
-        assert np.array_equal(v0, buf.label) and np.array_equal(v1, buf.label_v1) and sigmas is None
-    assert any(v1.any() for _, v1, _ in seen)
+        assert np.array_equal(injected, buf.label) and np.array_equal(error, buf.error_label) and sigmas is None
+    assert any(error.any() for _, error, _ in seen)
 
 
 def test_registry_metadata_and_loading(tmp_path):

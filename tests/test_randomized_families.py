@@ -182,7 +182,7 @@ def test_drift_and_outages_act_inside_their_drawn_windows():
 def world_buffers(spec, seeds: list[int], n_steps: int) -> dict[str, np.ndarray]:
     world = World(spec, len(seeds))
     world.reset(seeds)
-    out: dict[str, list] = {"z": [], "valid": [], "label": [], "label_v1": [], "systematic": []}
+    out: dict[str, list] = {"z": [], "valid": [], "label": [], "error_label": [], "systematic": []}
     for _ in range(n_steps):
         buf = world.sense()
         for key in out:

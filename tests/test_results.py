@@ -20,7 +20,6 @@ def _results(n_seeds: int = 3) -> R.Results:
             "metrics": R.EpisodeMetrics.of(
                 rmse=0.1 * (seed + 1), mean_error=0.05, max_error=1.0, diverged=False,
                 delay_ms=1.5, energy_j=0.2, jitter=0.01, team_return=123.0,
-                normalized_score=0.25 * seed,
             ),
         }
         for task in ("swarmloc/Ideal-v0", "swarmloc/NLOS-v0")
@@ -44,6 +43,8 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
     assert list(raw) == ["schema_version", "method", "suite", "provenance", "episodes", "aggregates", "score"]
     assert list(raw["episodes"][0]) == ["task", "seed", "metrics"]
     assert list(raw["episodes"][0]["metrics"]) == list(R.METRIC_NAMES)
+    assert "normalized_score" not in raw["episodes"][0]["metrics"]
+    assert "normalized_score" not in raw["aggregates"]["swarmloc/Ideal-v0"]
     assert raw["episodes"][0]["metrics"]["fault_rmse"] is None
     assert list(raw["aggregates"]["swarmloc/Ideal-v0"]["rmse"]) == list(R.AGGREGATE_FIELDS)
     assert raw["aggregates"]["swarmloc/Ideal-v0"]["cep90"] is None
@@ -56,7 +57,7 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
 
 def test_older_schema_reads_its_missing_metrics_as_null() -> None:
     raw = json.loads(R.dumps_results(_results()))
-    assert raw["schema_version"] == R.SCHEMA_VERSION == 3
+    assert raw["schema_version"] == R.SCHEMA_VERSION == 4
     raw["schema_version"] = 2
     for name in ("recovery_s", "recovered"):
         for episode in raw["episodes"]:
@@ -66,6 +67,38 @@ def test_older_schema_reads_its_missing_metrics_as_null() -> None:
     back = R.parse_results(json.dumps(raw))
     assert back.schema_version == 2 and R.SCHEMA_METRICS[2] == R.METRIC_NAMES[:-2]
     assert back.episodes[0].metrics.recovery_s is None and back.aggregates["swarmloc/Ideal-v0"]["recovered"] is None
+
+
+@pytest.mark.parametrize("version", [1, 2, 3])
+def test_an_older_file_loads_with_its_retired_normalized_score_ignored(version: int) -> None:
+    """Schema 1–3 files carry the retired v0 ``normalized_score`` (episodes and aggregates): accepted, left out."""
+    res = _results()
+    raw = json.loads(R.dumps_results(res))
+    raw["schema_version"] = version
+    for i, episode in enumerate(raw["episodes"]):
+        episode["metrics"]["normalized_score"] = 0.25 * i if i % 2 else None
+    for per_metric in raw["aggregates"].values():
+        per_metric["normalized_score"] = {"mean": 0.5, "iqm": 0.5, "ci_low": 0.0, "ci_high": 1.0}
+    back = R.parse_results(json.dumps(raw))
+    assert back.schema_version == version
+    assert "normalized_score" not in back.episodes[0].metrics.model_dump()
+    assert set(back.aggregates["swarmloc/Ideal-v0"]) == set(R.METRIC_NAMES)
+    assert back.episodes[1].metrics.rmse == res.episodes[1].metrics.rmse
+    # the current schema has no such metric: a version-4 file that carries it is off-schema
+    raw["schema_version"] = R.SCHEMA_VERSION
+    with pytest.raises(R.ResultsFileError, match="normalized_score: Extra inputs are not permitted"):
+        R.parse_results(json.dumps(raw))
+
+
+def test_the_shipped_results_files_load_without_the_retired_metric() -> None:
+    from swarmloc.leaderboard.shipped import shipped_results
+
+    for path in shipped_results():
+        raw = json.loads(path.read_text(encoding="utf-8"))
+        results = R.load_results(path)
+        assert raw["schema_version"] < R.SCHEMA_VERSION or "normalized_score" not in raw["episodes"][0]["metrics"]
+        assert "normalized_score" not in results.episodes[0].metrics.model_dump()
+        assert [e.metrics.rmse for e in results.episodes] == [e["metrics"]["rmse"] for e in raw["episodes"]]
 
 
 def test_write_is_atomic_on_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -100,7 +133,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None
         (b"\xff\xfe garbage", "not UTF-8"),
         (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
-        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3 \\(the file was written by a newer swarmloc: upgrade"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3, 4 \\(the file was written by a newer swarmloc: upgrade"),
     ],
 )
 def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:
@@ -170,8 +203,8 @@ def test_results_module_stays_light() -> None:
     assert out.stdout.strip() == "[]"
 
 
-def test_score_block_summarizes_the_episodes_v1() -> None:
-    """The results file's ``score`` block is score v1 of its own episodes (2^S, coverage, per-task gains)."""
+def test_score_block_summarizes_the_episodes() -> None:
+    """The results file's ``score`` block is the score of its own episodes (2^S, coverage, per-task gains)."""
     from swarmloc.bench.evaluation import score as S
 
     def ep(task: str, seed: int, rmse: float | None, uniform: float) -> dict:

@@ -41,7 +41,8 @@ def test_metric_definitions_per_task():
     out = evaluate_task(["uniform"], get_spec("swarmloc/Ideal-v0", duration=3.0), [1_000_000]).episodes["uniform"]
     m = out[0]
     assert m["fault_rmse"] is None and m["healthy_rmse"] is None and m["anomaly_detection_rate"] is None
-    assert m["normalized_score"] is None  # no labels: oracle == uniform
+    assert "normalized_score" not in m  # the retired v0 score
+    assert m["uniform_rmse"] == m["rmse"]  # uniform is its own reference
     assert m["recovery_s"] is None and m["recovered"] is None  # no IMU fault
     assert m["jitter"] == 0.0 and m["diverged"] == 0.0
     assert m["delay_ms"] > 0 and m["energy_j"] > 0
@@ -120,9 +121,9 @@ def test_a_suite_runs_each_reference_once_per_task_and_scores_as_evaluate_task(m
                                  ("swarmloc/CascadedFault-v0", 1_000_003)))
     runs = evaluate_methods(["chi2-gate", "random", "uniform"], suite, seeds_per_job=1, trace=False,
                             progress=False, overrides=short)
-    # one rollout per (method, chunk): uniform is shared with the evaluated method, oracle-v0 runs as its own job
+    # one rollout per (method, chunk): uniform, the only reference, is shared with the evaluated method
     assert sorted(ran) == sorted((m, t, (s,)) for t, s in suite.episodes
-                                 for m in ("chi2-gate", "random", "uniform", "oracle-v0"))
+                                 for m in ("chi2-gate", "random", "uniform"))
     for task in suite.tasks:
         alone = evaluate_task(["chi2-gate", "random", "uniform"], get_spec(task, **short), suite.seeds(task))
         for m in ("chi2-gate", "random", "uniform"):
@@ -136,22 +137,47 @@ def test_a_suite_runs_each_reference_once_per_task_and_scores_as_evaluate_task(m
         [e["metrics"]["rmse"] for e in runs["uniform"].episodes]
 
 
+@pytest.mark.parametrize("suite_name", ["standard-v0", "standard-v1"])
+def test_a_suite_evaluation_runs_no_oracle(monkeypatch, suite_name):
+    """The only reference job is uniform's, on v0 suites too: the v0 score's oracle is never run."""
+    import swarmloc.bench.evaluation.runner as runner
+    from swarmloc.bench.evaluation.suites import get_suite
+
+    class Stop(Exception):
+        pass
+
+    jobs: list = []
+
+    def record(fn, all_jobs, **kwargs):
+        jobs.extend(all_jobs)
+        raise Stop
+
+    monkeypatch.setattr(runner, "run_jobs", record)
+    monkeypatch.setattr(runner, "_REFERENCE_CACHE", {})
+    suite = get_suite(suite_name)
+    with pytest.raises(Stop):
+        evaluate_methods(["chi2-soft"], suite, trace=False, progress=False)
+    assert {j.method for j in jobs} == {"chi2-soft", "uniform"}
+    assert not any("oracle" in j.method for j in jobs)
+    assert sorted((j.task, s) for j in jobs if j.method == "uniform" for s in j.seeds) == sorted(suite.episodes)
+
+
 def test_a_failed_reference_fails_its_task_for_every_method(monkeypatch):
     import swarmloc.bench.evaluation.runner as runner
 
     real_rollout = runner.rollout
 
-    def broken_oracle(loaded, spec, seeds, trace=False):
-        if loaded.name == "oracle-v0" and spec.task_id == "swarmloc/NLOS-v0":
-            raise RuntimeError("no labels today")
+    def broken_uniform(loaded, spec, seeds, trace=False):
+        if loaded.name == "uniform" and spec.task_id == "swarmloc/NLOS-v0":
+            raise RuntimeError("no reference today")
         return real_rollout(loaded, spec, seeds, trace)
 
-    monkeypatch.setattr(runner, "rollout", broken_oracle)
+    monkeypatch.setattr(runner, "rollout", broken_uniform)
     monkeypatch.setattr(runner, "_REFERENCE_CACHE", {})
     suite = Suite("tiny2", "0", (("swarmloc/NLOS-v0", 1_000_000), ("swarmloc/Ideal-v0", 1_000_000)))
     run = evaluate_methods(["random"], suite, trace=False, progress=False, overrides={"duration": 3.0})["random"]
     assert list(run.failed) == ["swarmloc/NLOS-v0"]
-    assert run.failed["swarmloc/NLOS-v0"].startswith("the reference oracle-v0 failed on this task: RuntimeError")
+    assert run.failed["swarmloc/NLOS-v0"].startswith("the reference uniform failed on this task: RuntimeError")
     assert [e["task"] for e in run.episodes] == ["swarmloc/Ideal-v0"]
 
 

@@ -1,4 +1,4 @@
-"""Statistics used for aggregates: mean, IQM, stratified bootstrap CI, normalized score."""
+"""Statistics used for aggregates: mean, IQM, stratified bootstrap CI."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def _episode(task: str, seed: int, **metrics: float | None) -> dict:
 
 
 def test_aggregate_shape_and_undefined_metrics() -> None:
-    episodes = [_episode("T/a-v0", s, rmse=1.0 + s, normalized_score=0.5) for s in range(4)]
+    episodes = [_episode("T/a-v0", s, rmse=1.0 + s, jitter=0.5) for s in range(4)]
     episodes += [_episode("T/b-v0", s, rmse=2.0, fault_rmse=3.0 if s else None) for s in range(3)]
     agg = stats.aggregate(reversed(episodes))
     assert sorted(agg) == ["T/a-v0", "T/b-v0"]
@@ -66,14 +66,3 @@ def test_aggregate_shape_and_undefined_metrics() -> None:
     assert b is not None and (b.mean, b.ci_low, b.ci_high) == (3.0, 3.0, 3.0)
     # Order of episodes does not change the result.
     assert stats.aggregate(episodes) == agg
-
-
-def test_aggregate_across_tasks_pools_runs() -> None:
-    episodes = [_episode("a", s, normalized_score=0.0) for s in range(3)]
-    episodes += [_episode("b", s, normalized_score=1.0) for s in range(3)]
-    overall = stats.aggregate_across_tasks(episodes)
-    assert overall is not None and overall.mean == 0.5
-    assert (overall.ci_low, overall.ci_high) == (0.5, 0.5)  # stratified: always 3 + 3
-    assert stats.aggregate_across_tasks(episodes, "fault_rmse") is None
-    with pytest.raises(ValueError, match="unknown metric 'score'"):
-        stats.aggregate_across_tasks(episodes, "score")

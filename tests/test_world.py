@@ -22,7 +22,7 @@ def rollout(task_id: str, seeds: list[int], n_steps: int, **overrides) -> dict[s
     core = LinkTrustCore(spec, len(seeds))
     core.reset(seeds)
     gens = [np.random.default_rng(s) for s in seeds]  # trust stream per episode, keyed by its seed
-    out: dict[str, list] = {"estimate": [], "truth": [], "label": [], "label_v1": [], "resid": [], "nis": [],
+    out: dict[str, list] = {"estimate": [], "truth": [], "label": [], "error_label": [], "resid": [], "nis": [],
                             "flops": []}
     for _ in range(n_steps):
         trust = np.stack([g.uniform(0, 1, size=(spec.n_uav, spec.n_channels)) for g in gens])

@@ -55,7 +55,7 @@ def test_parallel_blocks_equal_single_episodes(task_id):
         out = batch.step(trust)
         for b, core in enumerate(singles):
             one = core.step(trust[b:b + 1])
-            for name in ("estimate", "resid", "nis", "jerk", "label", "label_v1", "flops"):
+            for name in ("estimate", "resid", "nis", "jerk", "label", "error_label", "flops"):
                 assert np.array_equal(getattr(out, name)[b], getattr(one, name)[0]), (name, b)
             assert np.array_equal(batch.pending_systematic_sigmas[b], core.pending_systematic_sigmas[0]), b
 

@@ -3,7 +3,7 @@
 The question a researcher asks between two runs (a new method against a baseline, new
 weights against the shipped ones, two training seeds) before submitting anything. Both
 files ran the same (task, seed) episodes, so the comparison is paired: per episode the
-difference of the gains over uniform (score v1, ``docs/scoring.md``), which is
+difference of the gains over uniform (the score, ``docs/scoring.md``), which is
 ``log2(RMSE_A / RMSE_B)`` — uniform's RMSE cancels. Per task the mean difference with its
 paired bootstrap CI; over the suite ``S_B − S_A`` with the CI the leaderboard ranks by
 (:func:`swarmloc.bench.evaluation.score.paired_difference`), and rliable's probability of
@@ -61,7 +61,7 @@ class Comparison:
     Attributes:
         name_a, name_b: the two methods' names.
         suite: the suite name both files ran.
-        score_a, score_b: score v1 of each on the compared episodes.
+        score_a, score_b: the score of each on the compared episodes.
         difference: ``S_B − S_A`` with its paired CI; ``ahead`` counts tasks.
         p_improvement: ``P(B > A)`` (rliable; per task over all seed pairs, mean over tasks).
         tasks: per task, in the order of A's file.

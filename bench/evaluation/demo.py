@@ -2,7 +2,7 @@
 
 Runs the registry's methods on a suite (default ``quick``), writes one results file per
 method (``<out>/results/<method>.json`` + traces), prints two tables — mean RMSE per
-task and method, and a per-method summary (score v1: 2^S with its 95 % CI, gap closed, coverage, delay,
+task and method, and a per-method summary (the score: 2^S with its 95 % CI, gap closed, coverage, delay,
 energy, jitter, weight variance, anomaly detection, divergence) — with the privileged
 oracle shown apart, writes the same tables as Markdown (``<out>/summary.md``) and the
 plots (``<out>/plots/``).
@@ -39,7 +39,7 @@ class SummaryRow:
     privileged: bool
     tasks: str  # tasks covered / tasks in the suite
     full: bool  # every task covered
-    score: tuple[float, float, float] | None  # 2^S, CI low, CI high (score v1)
+    score: tuple[float, float, float] | None  # 2^S, CI low, CI high (the score)
     gap_closed: float | None
     iqm_gain: float | None
     delay_ms: float | None
@@ -184,7 +184,7 @@ def markdown_tables(all_results: dict[str, Results], suite: Suite, cpu: dict[str
              "† privileged, not ranked; — not run):", ""]
     lines += markdown_table(header, rows, align="l" + "r" * (len(header) - 1))
     public, privileged = _ranked(all_results, cpu)
-    lines += ["", "Summary (score v1. × uniform: 2^S, how many times lower the error is than the standard CEKF's, "
+    lines += ["", "Summary (× uniform: 2^S, how many times lower the error is than the standard CEKF's, "
               "geometric mean over the covered tasks, stratified bootstrap 95% CI; gap closed: mean over tasks of "
               "the gain over the gain achievable down to the information bound; IQM g: interquartile mean of the "
               "per-episode log2 gains; partial coverage ranked apart; ms/step and mJ/UAV on the reference "

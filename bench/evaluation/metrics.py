@@ -23,7 +23,6 @@ UAV at every filter update k = 1 … T (t = k·dt); ``healthy_rmse``, ``recovery
 | ``weight_var`` | variance of the applied α over valid channel-steps |
 | ``anomaly_detection_rate`` | fraction of labelled channel-steps whose applied α < 0.5 (the method at least halved its trust: R inflated ≥ 2×; α ≤ α_th, skipping the channel, is included); dtvirm Table 6 "detected / abnormal"; null without labels |
 | ``team_return`` | Σ over all steps of the team standard reward (mean over all UAVs) |
-| ``normalized_score`` | (RMSE_uniform − RMSE) / (RMSE_uniform − RMSE_oracle) on the same episode; null when the gap is below 1 mm (e.g. no fault labels: oracle = uniform) |
 
 On a task with ``scoring.align_first_seconds > 0`` (anchor-free: absolute translation and
 yaw are unobservable), e is measured after the yaw + translation that aligns the first
@@ -44,8 +43,6 @@ import numpy as np
 DIVERGENCE_M = 10.0
 #: a labelled channel-step counts as detected when its applied trust is below this
 DETECTION_TRUST = 0.5
-#: the normalized score is undefined (null) when RMSE_uniform − RMSE_oracle is below this [m]
-MIN_SCORE_GAP_M = 1e-3
 #: percentile of the error reported as CEP90
 CEP_PERCENTILE = 90.0
 #: a faulty UAV has recovered once its error stays within this many times the healthy UAVs' RMSE …
@@ -269,26 +266,6 @@ def anomaly_detection_rate(applied: np.ndarray, label: np.ndarray,
 def team_return(team_rewards: np.ndarray) -> float:
     """Sum over steps of the team reward ``(T,)``."""
     return float(np.sum(np.asarray(team_rewards, dtype=np.float64)))
-
-
-def normalized_score(rmse_method: float, rmse_uniform: float, rmse_oracle: float,
-                     min_gap: float = MIN_SCORE_GAP_M) -> float | None:
-    """D4RL-style score (uniform = 0, oracle = 1) of one episode.
-
-    Args:
-        rmse_method, rmse_uniform, rmse_oracle: the three RMSEs on the same episode [m].
-        min_gap: smallest RMSE_uniform − RMSE_oracle for which the score is defined.
-
-    Returns:
-        The score, or None when the oracle does not improve on uniform by ``min_gap``.
-    """
-    if not (np.isfinite(rmse_uniform) and np.isfinite(rmse_oracle) and np.isfinite(rmse_method)):
-        return None
-    gap = rmse_uniform - rmse_oracle
-    if gap < min_gap:
-        return None
-    # (uniform − method) / (uniform − oracle): 0 as good as uniform, 1 as good as the oracle
-    return float((rmse_uniform - rmse_method) / gap)
 
 
 def node_groups(nodes: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -126,8 +126,8 @@ class EpisodeRecorder:
             self._positions = None
 
     def episode_metrics(self, b: int) -> dict[str, float | None]:
-        """Every metric of episode b except those against references (``normalized_score``, ``uniform_rmse``,
-        ``bound_rmse``: None here, filled in by the runner)."""
+        """Every metric of episode b except those against references (``uniform_rmse``, ``bound_rmse``:
+        None here, filled in by the runner)."""
         self._apply_alignment()
         s = self.spec
         steps = self.scored_steps
@@ -154,7 +154,6 @@ class EpisodeRecorder:
             "weight_var": self.stats.weight_var(b) if self.stats is not None else None,
             "anomaly_detection_rate": self.stats.anomaly_detection_rate(b) if self.stats is not None else None,
             "team_return": M.team_return(self.team[:, b]),
-            "normalized_score": None,
             "uniform_rmse": None,
             "bound_rmse": None,
             "recovery_s": None if recovery is None else recovery[0],

@@ -3,7 +3,7 @@
 One JSON document per (method, suite) evaluation, with exactly this top-level shape::
 
     {
-      "schema_version": 3,
+      "schema_version": 4,
       "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
       "suite":      {"name", "version", "sha256"},
       "provenance": {"package_version", "git_commit", "created_utc",
@@ -46,15 +46,18 @@ from pydantic import (
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
 
-SCHEMA_VERSION: Literal[3] = 3
+SCHEMA_VERSION: Literal[4] = 4
 """Version of the results-file schema written by this module; bump on any change.
 
-Version history: 1 — v0 metrics; 2 — adds ``uniform_rmse`` (the standard CEKF on the same
-episode, the reference of score v1) and ``bound_rmse`` (the episode's information bound);
-3 — adds ``recovery_s`` and ``recovered`` (the faulty UAVs' recovery after an IMU fault).
+Version history: 1 — the first metrics, ``normalized_score`` among them; 2 — adds
+``uniform_rmse`` (the standard CEKF on the same episode, the reference of the score) and
+``bound_rmse`` (the episode's information bound); 3 — adds ``recovery_s`` and ``recovered``
+(the faulty UAVs' recovery after an IMU fault); 4 — drops ``normalized_score`` (the retired
+score against the oracle of the old fault labels).
 """
-#: schema versions this module reads (an older file reads with the metrics it lacks null)
-READABLE_SCHEMA_VERSIONS = (1, 2, 3)
+#: schema versions this module reads (an older file reads with the metrics it lacks null,
+#: and without the retired ones)
+READABLE_SCHEMA_VERSIONS = (1, 2, 3, 4)
 
 METRIC_NAMES: tuple[str, ...] = (
     "rmse",
@@ -71,21 +74,22 @@ METRIC_NAMES: tuple[str, ...] = (
     "weight_var",
     "anomaly_detection_rate",
     "team_return",
-    "normalized_score",
     "uniform_rmse",
     "bound_rmse",
     "recovery_s",
     "recovered",
 )
 """Every per-episode metric, in the order they appear in results files."""
-METRIC_NAMES_V1: tuple[str, ...] = METRIC_NAMES[:METRIC_NAMES.index("uniform_rmse")]
-"""The metrics of schema version 1."""
+RETIRED_METRICS: dict[str, int] = {"normalized_score": 4}
+"""Metrics that files of older schema versions hold and this one does not, with the schema
+version that dropped them: reading such a file accepts them and leaves them out."""
 SCHEMA_METRICS: dict[int, tuple[str, ...]] = {
-    1: METRIC_NAMES_V1,
+    1: METRIC_NAMES[:METRIC_NAMES.index("uniform_rmse")],
     2: METRIC_NAMES[:METRIC_NAMES.index("recovery_s")],
     3: METRIC_NAMES,
+    4: METRIC_NAMES,
 }
-"""The metrics a results file of each schema version holds (the others read as null)."""
+"""The current metrics a results file of each schema version holds (the others read as null)."""
 
 AGGREGATE_FIELDS: tuple[str, ...] = ("mean", "iqm", "ci_low", "ci_high")
 """Statistics kept per (task, metric): mean, interquartile mean, 95 % bootstrap CI of the mean."""
@@ -165,7 +169,6 @@ class EpisodeMetrics(BaseModel):
     weight_var: MetricValue
     anomaly_detection_rate: MetricValue
     team_return: MetricValue
-    normalized_score: MetricValue
     uniform_rmse: MetricValue = None
     bound_rmse: MetricValue = None
     recovery_s: MetricValue = None
@@ -205,8 +208,8 @@ class Aggregate(BaseModel):
     ci_high: float
 
 
-class TaskScoreV1(BaseModel):
-    """Score v1 of one covered task (``swarmloc.bench.evaluation.score``).
+class TaskScoreBlock(BaseModel):
+    """The score of one covered task (``swarmloc.bench.evaluation.score``).
 
     Attributes:
         gain: ``G_t``, the mean over seeds of log2(RMSE_uniform / RMSE).
@@ -221,8 +224,8 @@ class TaskScoreV1(BaseModel):
     gap_closed: float | None
 
 
-class ScoreV1(BaseModel):
-    """Score v1 of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
+class ScoreBlock(BaseModel):
+    """The score of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
 
     Attributes:
         S, ci_low, ci_high: the suite score and its stratified-bootstrap 95 % CI.
@@ -243,10 +246,10 @@ class ScoreV1(BaseModel):
     gap_closed: float | None
     covered: int = Field(ge=0)
     total: int = Field(ge=1)
-    tasks: dict[str, TaskScoreV1]
+    tasks: dict[str, TaskScoreBlock]
 
 
-def score_v1(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreV1 | None:
+def score_block(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreBlock | None:
     """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file)."""
     from swarmloc.bench.evaluation.score import suite_score  # local: score imports stats, stats this module
 
@@ -254,9 +257,10 @@ def score_v1(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreV1 | Non
     if s is None:
         return None
     k, n = s.coverage
-    return ScoreV1(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, times=s.times, iqm=s.iqm, gap_closed=s.gap_closed,
-                   covered=k, total=n, tasks={t: TaskScoreV1(gain=v.mean, achievable=v.achievable,
-                                                             gap_closed=v.gap_closed) for t, v in s.tasks.items()})
+    tasks_block = {t: TaskScoreBlock(gain=v.mean, achievable=v.achievable, gap_closed=v.gap_closed)
+                   for t, v in s.tasks.items()}
+    return ScoreBlock(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, times=s.times, iqm=s.iqm, gap_closed=s.gap_closed,
+                      covered=k, total=n, tasks=tasks_block)
 
 
 class Results(BaseModel):
@@ -264,23 +268,35 @@ class Results(BaseModel):
 
     model_config = _FROZEN
 
-    schema_version: Literal[1, 2, 3] = SCHEMA_VERSION
+    schema_version: Literal[1, 2, 3, 4] = SCHEMA_VERSION
     method: MethodInfo
     suite: SuiteInfo
     provenance: Provenance
     episodes: list[Episode] = Field(min_length=1)
     aggregates: dict[str, dict[str, Aggregate | None]]
-    score: ScoreV1 | None = None
+    score: ScoreBlock | None = None
 
     @model_validator(mode="before")
     @classmethod
     def _read_older_versions(cls, raw: Any) -> Any:
-        """An older file lacks the later versions' metrics: they read as null (aggregates included)."""
+        """An older file lacks the later versions' metrics: they read as null (aggregates included);
+        it may hold retired metrics: they are accepted and left out (episodes and aggregates)."""
         version = raw.get("schema_version") if isinstance(raw, dict) else None
-        if version in SCHEMA_METRICS and version != SCHEMA_VERSION and isinstance(raw.get("aggregates"), dict):
+        if version not in SCHEMA_METRICS or version == SCHEMA_VERSION:
+            return raw
+        retired = {name for name, dropped in RETIRED_METRICS.items() if version < dropped}
+
+        def current(metrics: Any) -> Any:
+            return {k: v for k, v in metrics.items() if k not in retired} if isinstance(metrics, dict) else metrics
+
+        raw = dict(raw)
+        if isinstance(raw.get("episodes"), list):
+            raw["episodes"] = [{**e, "metrics": current(e.get("metrics"))} if isinstance(e, dict) else e
+                               for e in raw["episodes"]]
+        if isinstance(raw.get("aggregates"), dict):
             added = {name: None for name in METRIC_NAMES if name not in SCHEMA_METRICS[version]}
-            raw = {**raw, "aggregates": {task: ({**added, **per} if isinstance(per, dict) else per)
-                                         for task, per in raw["aggregates"].items()}}
+            raw["aggregates"] = {task: ({**added, **current(per)} if isinstance(per, dict) else per)
+                                 for task, per in raw["aggregates"].items()}
         return raw
 
     @model_validator(mode="after")
@@ -349,7 +365,7 @@ def make_results(
 
     Returns:
         The validated results, aggregates from :func:`swarmloc.bench.evaluation.stats.aggregate`
-        and the score v1 block from :func:`score_v1`.
+        and the ``score`` block from :func:`score_block`.
     """
     from swarmloc.bench.evaluation.stats import aggregate  # local: stats imports this module
 
@@ -361,7 +377,7 @@ def make_results(
         provenance=provenance or collect_provenance(),
         episodes=parsed,
         aggregates=aggregates,
-        score=score_v1(parsed, list(aggregates)),
+        score=score_block(parsed, list(aggregates)),
     )
 
 
@@ -501,6 +517,7 @@ def load_results(path: str | os.PathLike[str], max_bytes: int | None = None) -> 
 __all__ = [
     "AGGREGATE_FIELDS",
     "METRIC_NAMES",
+    "RETIRED_METRICS",
     "SCHEMA_METRICS",
     "SCHEMA_VERSION",
     "Aggregate",
@@ -511,12 +528,15 @@ __all__ = [
     "Provenance",
     "Results",
     "ResultsFileError",
+    "ScoreBlock",
     "SuiteInfo",
+    "TaskScoreBlock",
     "collect_provenance",
     "dumps_results",
     "load_results",
     "make_results",
     "parse_results",
+    "score_block",
     "suite_sha256",
     "write_results",
 ]

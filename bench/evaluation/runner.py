@@ -8,19 +8,21 @@ index) and methods draw from per-episode keys, so an episode's metrics are ident
 alone or batched, in any process, on any backend — which is what lets the leaderboard's
 verifier re-run a sample with :func:`run_episodes`.
 
-**Normalized score (v0).** Each episode's score compares its RMSE with the RMSE of the two
-reference methods, ``uniform`` (score 0) and the privileged ``oracle-v0`` (score 1), run
-on the same (task, seed) on the fly. A suite evaluation runs each once per task chunk, as
-jobs of their own (or shares the evaluated methods' runs) and fills the scores in when the
-task is done; ``evaluate_task`` alone runs them itself, cached per process. Nothing
-precomputed is shipped, so a score is always consistent with the code that produced it.
+**The reference.** The score (``score.py``, docs/scoring.md) compares each episode's RMSE
+with that of the reference method ``uniform`` (the standard CEKF, α = 1) on the same
+(task, seed), run on the fly and recorded as ``uniform_rmse``. A suite evaluation runs it
+once per task chunk, as a job of its own (or shares the evaluated method's run) and fills
+it in when the task is done; ``evaluate_task`` alone runs it itself, cached per process.
+Nothing precomputed is shipped, so a score is always consistent with the code that
+produced it.
 
 Privileged methods get the pending measurements' fault labels through
 ``observe_privileged`` before every ``act``/``step``; no other method ever does. A
-``PrivilegedInfo`` carries labels v0 (what the v0 metrics read) and labels v1
-(``swarmloc.envs.labels``): on Track A the core's, peer links included through the
-neighbour's broadcast estimate, with the systematic error in σ_eff behind them; on Track B
-the world's, the measurement's own error only (an estimator's estimates are its own).
+``PrivilegedInfo`` carries the injected-fault labels (what the detection metrics count)
+and the error labels (``swarmloc.envs.labels``): on Track A the core's, peer links included
+through the neighbour's broadcast estimate, with the systematic error in σ_eff behind them;
+on Track B the world's, the measurement's own error only (an estimator's estimates are its
+own).
 """
 
 from __future__ import annotations
@@ -43,8 +45,7 @@ from swarmloc.agents.protocols import (
     UnsupportedTask,
     episode_keys,
 )
-from swarmloc.agents.registry import REFERENCE_ORACLE, REFERENCE_UNIFORM, LoadedMethod, load_method
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.agents.registry import REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench.evaluation.backends import (
     BACKENDS,
     MAX_WORKERS,
@@ -126,7 +127,8 @@ def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, tra
                               (k + 1) * spec.dt, k + 1)
         if loaded.privileged:
             policy.observe_privileged(PrivilegedInfo(
-                labels=_readonly(env.pending_labels().copy()), labels_v1=_readonly(env.pending_labels_v1().copy()),
+                labels=_readonly(env.pending_labels().copy()),
+                error_labels=_readonly(env.pending_error_labels().copy()),
                 systematic_sigmas=_readonly(env.pending_systematic_sigmas().copy())))
         cs, terms = env.step(env.check(policy.act(inp)))
         rec.record(k, cs.estimate, cs.truth, cs.update_valid, cs.label, cs.applied, cs.prev_trust, terms.flops,
@@ -172,7 +174,7 @@ def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
                                     getattr(buf, "velocity", None))
         if loaded.privileged:
             est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy()),
-                                                  labels_v1=_readonly(buf.label_v1.copy())))
+                                                  error_labels=_readonly(buf.error_label.copy())))
         out = _check_output(est.step(meas), loaded.name, shape)
         if rec is None:
             rec = EpisodeRecorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
@@ -218,7 +220,7 @@ def rollout(loaded: LoadedMethod, spec: TaskSpec, seeds: Sequence[int],
         trace: also return the per-step trace of the first seed.
 
     Returns:
-        ``(metrics per seed, trace or None)``; ``normalized_score`` is None here.
+        ``(metrics per seed, trace or None)``; ``uniform_rmse`` and ``bound_rmse`` are None here.
     """
     seeds = validate_seeds(list(seeds))
     run = _rollout_policy if loaded.track == "A" else _rollout_estimator
@@ -237,7 +239,7 @@ def _spec_key(spec: TaskSpec) -> str:
 
 
 def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[float]:
-    """RMSE of a reference method (``uniform`` or ``oracle-v0``) per seed, cached per process."""
+    """RMSE of the reference method (``uniform``) per seed, cached per process."""
     key = _spec_key(spec)
     missing = [int(s) for s in seeds if (name, key, int(s)) not in _REFERENCE_CACHE]
     if missing:
@@ -250,7 +252,7 @@ def reference_rmse(name: str, spec: TaskSpec, seeds: Sequence[int]) -> list[floa
 def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[int], *,
                   weights: Mapping[str, str | None] | None = None, trace: bool = False,
                   references: bool = True) -> TaskOutcome:
-    """Evaluate methods on one task's seeds (one batch per method), normalized scores included.
+    """Evaluate methods on one task's seeds (one batch per method), the reference's RMSE included.
 
     Args:
         methods: method names or entry points (see ``load_method``).
@@ -258,9 +260,9 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
         seeds: the episode seeds.
         weights: optional method → weights file.
         trace: keep the trace of the first seed of each method.
-        references: run the references here (cached per process) and fill in
-            ``normalized_score`` and ``uniform_rmse``; False leaves both None for the caller
-            (``evaluate_methods`` runs each reference once per task, as a job of its own).
+        references: run the reference here (cached per process) and fill in
+            ``uniform_rmse``; False leaves it None for the caller (``evaluate_methods`` runs
+            the reference once per task chunk, as a job of its own).
 
     Returns:
         The ``TaskOutcome``.
@@ -284,7 +286,7 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
         outcome.episodes[text] = metrics
         if tr is not None:
             outcome.traces[text] = tr
-        if text in (REFERENCE_UNIFORM, REFERENCE_ORACLE):
+        if text == REFERENCE_UNIFORM:
             key = _spec_key(spec)
             for seed, m in zip(seeds, metrics):
                 _REFERENCE_CACHE[(text, key, seed)] = float(m["rmse"])  # type: ignore[arg-type]
@@ -295,23 +297,21 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
             if m["rmse"] is not None:
                 m["bound_rmse"] = bound
     if references:
-        fill_references(outcome.episodes.values(), reference_rmse(REFERENCE_UNIFORM, spec, seeds),
-                        reference_rmse(REFERENCE_ORACLE, spec, seeds))
+        fill_reference(outcome.episodes.values(), reference_rmse(REFERENCE_UNIFORM, spec, seeds))
     return outcome
 
 
-def fill_references(episodes: Any, uniform: Sequence[float], oracle: Sequence[float]) -> None:
-    """Fill in ``normalized_score`` (v0) and ``uniform_rmse`` (score v1's reference) of metrics dicts.
+def fill_reference(episodes: Any, uniform: Sequence[float]) -> None:
+    """Fill in ``uniform_rmse`` (the reference of the score, ``swarmloc.bench.evaluation.score``) of metrics dicts.
 
     Args:
         episodes: per method, one metrics dict per seed (an iterable of lists), changed in place.
-        uniform, oracle: the references' RMSE per seed, in the same order.
+        uniform: the reference's RMSE per seed, in the same order.
     """
     for metrics in episodes:
-        for m, u, o in zip(metrics, uniform, oracle, strict=True):
+        for m, u in zip(metrics, uniform, strict=True):
             if m["rmse"] is not None:
-                m["normalized_score"] = M.normalized_score(m["rmse"], u, o)  # type: ignore[arg-type]
-                m["uniform_rmse"] = u  # the reference of score v1 (swarmloc.bench.evaluation.score)
+                m["uniform_rmse"] = u
 
 
 def run_episodes(method: str, episodes: list[tuple[str, int]], weights: str | None = None) -> list[dict]:
@@ -424,13 +424,13 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
     loaded = {m: load_method(m, weights.get(m)) for m in methods}  # fail fast, before any work
     require_data(suite)  # a recorded task whose data is not imported here: say so before any work
     # one job per (method, task, seed chunk): the workers balance methods of very different
-    # cost. The two references of the scores run once per chunk, as jobs of their own (or as
-    # the evaluated methods themselves), and are filled in here when a task's jobs are done
-    extra = [r for r in (REFERENCE_UNIFORM, REFERENCE_ORACLE) if r not in methods]
+    # cost. The reference of the score runs once per chunk, as a job of its own (or as the
+    # evaluated method itself), and is filled in here when a task's jobs are done
+    extra = [r for r in (REFERENCE_UNIFORM,) if r not in methods]
     keys = {task: _spec_key(get_spec(task, **(overrides or {}))) for task in suite.tasks}
     jobs: list[Job] = []
     for job in make_jobs(methods, suite, seeds_per_job, trace, overrides):
-        if job.method == methods[0]:  # a chunk's first job: the chunk's references go just before it
+        if job.method == methods[0]:  # a chunk's first job: the chunk's reference goes just before it
             jobs += [Job(job.task, ref, job.seeds, False, overrides) for ref in extra
                      if any((ref, keys[job.task], s) not in _REFERENCE_CACHE for s in job.seeds)]
         jobs.append(job)
@@ -468,26 +468,24 @@ def evaluate_methods(methods: Sequence[str], suite: Suite, *, workers: int = 1, 
 
 
 def _score_task(gathered: Gathered, task: str, seeds: Sequence[int], methods: Sequence[str], key: str) -> None:
-    """Fill in the reference scores of a finished task's episodes; a failed reference fails the task for all.
+    """Fill in the reference's RMSE of a finished task's episodes; a failed reference fails the task for all.
 
-    The references come from this evaluation's runs (kept in the process cache, for the next
+    The reference comes from this evaluation's runs (kept in the process cache, for the next
     evaluation here) or, where it ran none, from that cache.
     """
-    refs: dict[str, list[float]] = {}
-    for ref in (REFERENCE_UNIFORM, REFERENCE_ORACLE):
-        if (ref, task) in gathered.failed or (ref, task) in gathered.unsupported:
-            why = gathered.failed.get((ref, task)) or gathered.unsupported[(ref, task)]
-            for m in methods:
-                gathered.failed.setdefault((m, task), f"the reference {ref} failed on this task: {why}")
-            return
-        for s in seeds:
-            run = gathered.metrics.get((ref, task, s))
-            if run is not None:
-                _REFERENCE_CACHE[(ref, key, s)] = float(run["rmse"])  # type: ignore[arg-type]
-        refs[ref] = [_REFERENCE_CACHE[(ref, key, s)] for s in seeds]
+    ref = REFERENCE_UNIFORM
+    if (ref, task) in gathered.failed or (ref, task) in gathered.unsupported:
+        why = gathered.failed.get((ref, task)) or gathered.unsupported[(ref, task)]
+        for m in methods:
+            gathered.failed.setdefault((m, task), f"the reference {ref} failed on this task: {why}")
+        return
+    for s in seeds:
+        run = gathered.metrics.get((ref, task, s))
+        if run is not None:
+            _REFERENCE_CACHE[(ref, key, s)] = float(run["rmse"])  # type: ignore[arg-type]
     scored = [m for m in methods if (m, task) not in gathered.failed]
-    fill_references(([gathered.metrics[(m, task, s)] for s in seeds] for m in scored), refs[REFERENCE_UNIFORM],
-                    refs[REFERENCE_ORACLE])
+    fill_reference(([gathered.metrics[(m, task, s)] for s in seeds] for m in scored),
+                   [_REFERENCE_CACHE[(ref, key, s)] for s in seeds])
 
 
 def evaluate(method: str, suite: Suite, out: str | os.PathLike[str] | None = None, *, workers: int = 1,

@@ -1,4 +1,4 @@
-"""Score v1: how many times lower the error is than the standard CEKF's, per task and over a suite.
+"""The score: how many times lower the error is than the standard CEKF's, per task and over a suite.
 
 Per episode the **gain** over uniform trust (the standard CEKF, α = 1, on the same episode)::
 
@@ -10,7 +10,7 @@ shown as ``2^S``: "× lower error than the standard CEKF". Its 95 % CI is a stra
 bootstrap: seeds are resampled within each task, and ``S`` recomputed (rliable's
 recommendation for few runs per task). A log ratio bounds what one bad task can do: a
 method that diverges to 150 m where uniform has 1.5 m loses log2(100) ≈ 6.6 on that task,
-not the −50 that the v0 normalized score gave it.
+not the −50 that a score normalized by the gap to an oracle gave it (benchmark v0's, retired).
 
 Beside it, the information bound (``bound_rmse``, the posterior Cramér–Rao bound of the
 episode) gives each task an **achievable** gain ``A_t = mean log2(RMSE_uniform / bound)``
@@ -159,7 +159,7 @@ def bootstrap_suite_ci(tasks: Sequence[np.ndarray], n_resamples: int = DEFAULT_R
 
 def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None = None, *,
                 n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> SuiteScore | None:
-    """Score v1 of one method from its per-episode metrics.
+    """The score of one method from its per-episode metrics.
 
     Args:
         episodes: ``{"task", "seed", "metrics": {"rmse", "uniform_rmse", "bound_rmse", ...}}``

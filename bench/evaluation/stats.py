@@ -1,15 +1,12 @@
-"""Aggregate statistics over seeds: mean, IQM, stratified bootstrap CIs, normalized score.
+"""Aggregate statistics over seeds: mean, IQM, stratified bootstrap CIs.
 
 Following rliable's recommendation (Agarwal et al., 2021) we report the mean and the
 interquartile mean (IQM) of each metric over seeds, with a 95 % percentile-bootstrap
 confidence interval of the mean. Across several tasks the bootstrap is *stratified*:
 each resample draws seeds with replacement inside every task separately, so each task
 keeps its number of runs. Resampling uses a seeded numpy generator and sorts runs by
-(task, seed) first, so the same episodes give the same interval in any order.
-
-The normalized task score is D4RL-style:
-``(RMSE_uniform − RMSE_method) / (RMSE_uniform − RMSE_oracle)``,
-0 for uniform-trust CEKF and 1 for the privileged oracle trust.
+(task, seed) first, so the same episodes give the same interval in any order. The score
+across tasks (log2 gain over uniform) is in ``score.py``.
 """
 
 from __future__ import annotations
@@ -219,52 +216,11 @@ def aggregate(
     return out
 
 
-def aggregate_across_tasks(
-    episodes: Iterable[Episode | Mapping[str, Any]],
-    metric: str = "normalized_score",
-    *,
-    n_resamples: int = DEFAULT_RESAMPLES,
-    seed: int = DEFAULT_BOOTSTRAP_SEED,
-) -> Aggregate | None:
-    """One metric pooled over all (task, seed) runs, with a task-stratified bootstrap CI.
-
-    This is the leaderboard's headline number (``metric="normalized_score"``): mean and
-    IQM of all runs pooled, and the 95 % CI of the mean from resampling seeds within
-    each task.
-
-    Args:
-        episodes: ``Episode`` objects or dicts ``{"task", "seed", "metrics"}``.
-        metric: A name from ``METRIC_NAMES``.
-        n_resamples: Bootstrap resamples.
-        seed: Bootstrap seed.
-
-    Returns:
-        The aggregate, or ``None`` when no episode defines the metric.
-    """
-    if metric not in METRIC_NAMES:
-        raise ValueError(f"unknown metric {metric!r}; allowed: {list(METRIC_NAMES)}")
-    runs = []
-    for episode in episodes:
-        task, episode_seed, metrics = _episode_parts(episode)
-        if metrics.get(metric) is not None:
-            runs.append((task, episode_seed, float(metrics[metric])))
-    if not runs:
-        return None
-    runs.sort(key=lambda item: (item[0], item[1]))
-    return summarize(
-        [value for _, _, value in runs],
-        [task for task, _, _ in runs],
-        n_resamples=n_resamples,
-        seed=seed,
-    )
-
-
 __all__ = [
     "DEFAULT_BOOTSTRAP_SEED",
     "DEFAULT_CONFIDENCE",
     "DEFAULT_RESAMPLES",
     "aggregate",
-    "aggregate_across_tasks",
     "bootstrap_ci",
     "iqm",
     "mean",

@@ -13,7 +13,7 @@ information bound ``bound_rmse`` per episode), and the report gives per task
   ``<Family>RandomShifted-v1``, parameters outside the training ranges) whether the shifted
   split is measurably harder for uniform and the best classical method (the per-seed log
   ratio shifted / in-distribution, paired on the shared test seeds, with its CI above 0);
-* the gap closed (score v1) of every method evaluated here and of every registered method
+* the gap closed (``score.py``) of every method evaluated here and of every registered method
   whose shipped results (the suite's folder, ``leaderboard/results/standard-v1``) hold these
   tasks and seeds.
 
@@ -316,7 +316,7 @@ def shipped_episodes(results_dir: Path, tasks: Sequence[str], seeds: Mapping[str
 
 
 def gap_closed_table(methods: Mapping[str, Mapping[str, Any]], tasks: Sequence[str]) -> dict[str, Any]:
-    """Score v1's gap closed (Σ G_t / Σ A_t over tasks with a gap) of each method: over the suite, per family.
+    """The score's gap closed (Σ G_t / Σ A_t over tasks with a gap) of each method: over the suite, per family.
 
     Args:
         methods: method → ``{"source", "privileged", "episodes"}``.

@@ -8,7 +8,7 @@ Every v1 task must pass five criteria (``swarmloc reproduce calibration`` report
    non-privileged method within CI (both on paired per-seed differences, 95 % bootstrap);
 2. **the fault matters** (fault tasks) — uniform ≥ 2× the bound (task means);
 3. **headroom** — single-step gating (``chi2-soft``, ``chi2-gate``) closes ≤ 70 % of the
-   achievable gap (score v1, ``swarmloc.bench.evaluation.score``), on at least half of the
+   achievable gap (the score, ``swarmloc.bench.evaluation.score``), on at least half of the
    fault tasks;
 4. **the paper's phenomenon** — one row per family (``calibration_phenomena``);
 5. **nothing degenerate** — ``random`` trust ≥ 10 % worse (RMSE) than the best method.
@@ -124,14 +124,14 @@ def fault_matters(uniform: np.ndarray, bound: np.ndarray | None, fault_task: boo
 
 
 def gap_closed(task: str, metrics: Sequence[Mapping[str, Any]]) -> dict[str, float | None]:
-    """Score v1 of one method on one task: ``G_t``, ``A_t`` and the gap closed ``G_t / A_t``.
+    """The score of one method on one task: ``G_t``, ``A_t`` and the gap closed ``G_t / A_t``.
 
     Args:
         task: the task ID.
         metrics: per-seed metric dicts (``rmse``, ``uniform_rmse``, ``bound_rmse``).
 
     Returns:
-        ``{"gain", "achievable", "gap_closed"}`` (None where score v1 leaves them undefined).
+        ``{"gain", "achievable", "gap_closed"}`` (None where the score leaves them undefined).
     """
     s = suite_score([{"task": task, "seed": i, "metrics": m} for i, m in enumerate(metrics)], [task])
     t = s.tasks.get(task) if s is not None else None

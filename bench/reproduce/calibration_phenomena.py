@@ -110,7 +110,7 @@ def ideal(ev: Evidence) -> Phenomenon:
 
 def nlos(ev: Evidence) -> Phenomenon:
     """Reported only: uniform/oracle and the fraction of scored steps where ≥ 2 channels of the scored UAVs
-    carry an injected fault (the labels v0 of uniform's traces), averaged over the seeds."""
+    carry an injected fault (the fault labels of uniform's traces), averaged over the seeds."""
     u, o = ev.values("uniform"), ev.values("oracle")
     parts = [] if u is None or o is None else [f"uniform/oracle {u.mean() / o.mean():.1f}"]
     frac = None

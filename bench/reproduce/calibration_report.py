@@ -158,7 +158,7 @@ def _phenomena(raw: Mapping[str, Any]) -> list[str]:
              "outside the scored fault window (other outage windows included); GradualFault's bound is the "
              "information bound over the fault window on the scored UAVs (\"episode\": over the episode, where "
              "no window bound exists); NLOS is reported, not judged (faulty links: channels with an injected fault, "
-             "labels v0).", ""]
+             "the world's fault label).", ""]
             + markdown_table(["task", "target (source)", "measured", "holds"], rows) + [""])
 
 
@@ -196,7 +196,7 @@ def _gap_closed(raw: Mapping[str, Any]) -> list[str]:
             f"No shipped results (`{where}`) cover these tasks and seeds"
             + (" (shortened episodes are never compared with them)" if raw["overrides"] else "")
             + ": only the classical methods evaluated here are shown.")
-    return (["## Gap closed (score v1)", "",
+    return (["## Gap closed", "",
              "Σ G_t / Σ A_t over the tasks with a gap (A_t ≥ log2 1.25), over the suite and per family; "
              "`tasks with gap`: k of the covered tasks. " + note, ""]
             + markdown_table(["method", "source", "suite", "tasks with gap"] + families, rows,

@@ -1,6 +1,6 @@
-"""``swarmloc reproduce labels``: the calibration of fault labels v1 (``swarmloc.envs.labels``).
+"""``swarmloc reproduce labels``: the calibration of the error labels (``swarmloc.envs.labels``).
 
-The oracle on labels v1 must be the ceiling of the trust policies and still an estimator.
+The oracle on the error labels must be the ceiling of the trust policies and still an estimator.
 On every standard-v0 task (its 32 test seeds) this report runs the oracle at several label
 thresholds through the runner (``evaluate_methods``, the leaderboard's metrics) and compares
 it, per seed, with
@@ -45,42 +45,42 @@ _HERE = "swarmloc.bench.reproduce.labels"
 
 def oracle_k1() -> OracleTrust:
     """k = 1 for ranges, the shipped 3-vector radius."""
-    return OracleTrust(ALPHA_MIN, "v1", 1.0)
+    return OracleTrust(ALPHA_MIN, 1.0)
 
 
 def oracle_k2() -> OracleTrust:
     """k = 2 for ranges, the shipped 3-vector radius."""
-    return OracleTrust(ALPHA_MIN, "v1", 2.0)
+    return OracleTrust(ALPHA_MIN, 2.0)
 
 
 def oracle_k3() -> OracleTrust:
     """k = 3 for ranges, the shipped 3-vector radius."""
-    return OracleTrust(ALPHA_MIN, "v1", 3.0)
+    return OracleTrust(ALPHA_MIN, 3.0)
 
 
 def oracle_vector_1sigma() -> OracleTrust:
     """The shipped k; 3-vector channels at the 1σ false-alarm radius (1.88)."""
-    return OracleTrust(ALPHA_MIN, "v1", LABEL_SIGMAS, equivalent_radius(1.0, 3))
+    return OracleTrust(ALPHA_MIN, LABEL_SIGMAS, equivalent_radius(1.0, 3))
 
 
 def oracle_vector_2sigma() -> OracleTrust:
     """The shipped k; 3-vector channels at the 2σ false-alarm radius (2.83)."""
-    return OracleTrust(ALPHA_MIN, "v1", LABEL_SIGMAS, equivalent_radius(2.0, 3))
+    return OracleTrust(ALPHA_MIN, LABEL_SIGMAS, equivalent_radius(2.0, 3))
 
 
 def oracle_single_k1() -> OracleTrust:
     """k = 1 for every channel (3-vector channels: Mahalanobis norm > 1)."""
-    return OracleTrust(ALPHA_MIN, "v1", 1.0, 1.0)
+    return OracleTrust(ALPHA_MIN, 1.0, 1.0)
 
 
 def oracle_single_k2() -> OracleTrust:
     """k = 2 for every channel."""
-    return OracleTrust(ALPHA_MIN, "v1", 2.0, 2.0)
+    return OracleTrust(ALPHA_MIN, 2.0, 2.0)
 
 
 def oracle_single_k3() -> OracleTrust:
     """k = 3 for every channel."""
-    return OracleTrust(ALPHA_MIN, "v1", 3.0, 3.0)
+    return OracleTrust(ALPHA_MIN, 3.0, 3.0)
 
 
 #: table → [(column title, method: a registered name or an entry point of this module)]
@@ -188,18 +188,18 @@ def _cell(s: dict[str, Any]) -> str:
 
 
 def table_lines(title: str, columns: list[tuple[str, str]], tasks: list[str],
-                summaries: dict[str, dict[str, Any]], v0: dict[str, float]) -> list[str]:
-    """One Markdown table: task, bound, uniform, oracle-v0, best shipped, the variants' oracle RMSE."""
-    header = ["task", "bound", "uniform", "oracle-v0", "best non-privileged"] + [c for c, _ in columns]
+                summaries: dict[str, dict[str, Any]]) -> list[str]:
+    """One Markdown table: task, bound, uniform, best shipped, the variants' oracle RMSE."""
+    header = ["task", "bound", "uniform", "best non-privileged"] + [c for c, _ in columns]
     rows = []
     for task in tasks:
         first = summaries[columns[0][1]][task]
         bound = "—" if first["bound"] is None else f"{first['bound']:.4f}"
-        rows.append([task.removeprefix("swarmloc/"), bound, f"{first['uniform']:.4f}", f"{v0[task]:.4f}",
+        rows.append([task.removeprefix("swarmloc/"), bound, f"{first['uniform']:.4f}",
                      f"{first['best_rmse']:.4f} {first['best']}"] + [_cell(summaries[m][task]) for _, m in columns])
-    verdict = ["**passes**", "", "", "", ""] + [
+    verdict = ["**passes**", "", "", ""] + [
         "yes" if not any(failures(summaries[m][t]) for t in tasks) else "no" for _, m in columns]
-    return [f"### {title}", ""] + markdown_table(header, rows + [verdict], "lrrrl" + "r" * len(columns)) + [""]
+    return [f"### {title}", ""] + markdown_table(header, rows + [verdict], "lrrl" + "r" * len(columns)) + [""]
 
 
 def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: Path | None = None,
@@ -226,7 +226,7 @@ def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: 
     episodes = lambda ts: tuple((t, s) for t in ts for s in by_task[t])  # noqa: E731
     shipped = shipped_per_seed(results_dir or RESULTS_DIR, tasks, by_task)
 
-    everywhere = sorted({m for _, m in TABLES["scalar k (ranges), 3-vector radius as shipped"]}) + ["oracle-v0"]
+    everywhere = sorted({m for _, m in TABLES["scalar k (ranges), 3-vector radius as shipped"]})
     vector_only = sorted({m for title, cols in TABLES.items() if title.startswith(VECTOR_TABLES)
                           for _, m in cols} - set(everywhere))
     runs: dict[str, list[dict]] = {}
@@ -237,18 +237,17 @@ def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: 
                 raise RuntimeError(f"{m} failed on {sorted(run.failed)}: {next(iter(run.failed.values()))}")
             runs[m] = run.episodes
     summaries = {m: {t: task_summary(eps, t, by_task[t], shipped) for t in tasks if any(e["task"] == t for e in eps)}
-                 for m, eps in runs.items() if m != "oracle-v0"}
+                 for m, eps in runs.items()}
     for m, same in SAME_ON_RANGE_TASKS.items():  # the range-only tasks, for the verdict
         summaries[m] = {t: summaries[m].get(t, summaries[same][t]) for t in tasks}
-    v0 = {t: float(np.mean([e["metrics"]["rmse"] for e in runs["oracle-v0"] if e["task"] == t])) for t in tasks}
 
     lines = _intro(seeds)
     for title, columns in TABLES.items():
         lines += table_lines(title, columns, vector_tasks if title.startswith(VECTOR_TABLES) else tasks,
-                             summaries, v0)
+                             summaries)
     lines += _cascaded(summaries)
     lines += _verdict(summaries, tasks)
-    raw = {"seeds": seeds, "tables": TABLES, "summaries": summaries, "oracle_v0": v0,
+    raw = {"seeds": seeds, "tables": TABLES, "summaries": summaries,
            "label_sigmas": LABEL_SIGMAS, "vector_label_sigmas": VECTOR_LABEL_SIGMAS,
            "vector_radius": equivalent_radius(VECTOR_LABEL_SIGMAS, 3)}
     return write_paper_report(out, "labels", "\n".join(lines) + "\n", raw)
@@ -257,7 +256,7 @@ def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: 
 def _intro(seeds: int) -> list[str]:
     r = equivalent_radius(VECTOR_LABEL_SIGMAS, 3)
     return [
-        "# Fault labels v1: calibrating k",
+        "# Error labels: calibrating k",
         "",
         "A channel-step is labelled when its systematic error as the filter uses it (injected bias, GPS",
         "drift, heavy-tail excess; for a peer link the neighbour's broadcast-estimate error) exceeds a",

@@ -66,7 +66,7 @@ FAULT_TEXT = {
     1: {"step": "Anchors 0, 2 and 4 (one side of the room) get +1.0, +0.5 and +0.6 m from 20 s to 30 s, near the "
                 "noise floor (the paper: anchor 2, 3 m, 20–30 s).",
         "cascade": "As v0: UAVs 1 and 2 (the paper's nodes 2, 3) get an IMU bias [1.5, 1.2, 0.5] m/s² and go blind "
-                   "from 20 s to 35 s; UAVs 0 and 3 are scored (labels v1 follow the broadcast error)."},
+                   "from 20 s to 35 s; UAVs 0 and 3 are scored (the error labels follow the broadcast error)."},
 }
 #: the learned reference measured beside the paper's mappo on v1 tasks
 LEARNED_V1 = "mappo-set-gru"

@@ -15,11 +15,11 @@ which calibration); ``util_flight`` holds the rules that turn the log into steps
   initial prior: truth at step 0 plus N(0, init_pos_sigma²) per position axis and
   N(0, init_vel_sigma²) per velocity axis, drawn from the same counter-based streams as
   the simulated world.
-* **Labels v1.** On real data the systematic error cannot be told apart from the noise:
+* **Error labels.** On real data the systematic error cannot be told apart from the noise:
   the calibrated residual (range − true distance) stands for it
-  (``SenseBuffers.systematic``), and labels v1 apply the simulated world's rule to it
+  (``SenseBuffers.systematic``), and the error labels apply the simulated world's rule to it
   (|residual| / σ above the threshold, k for ranges). The recording's own labels
-  (``util_flight``) stay the v0 labels.
+  (``util_flight``) are its injected-fault labels (``SenseBuffers.label``).
 * **No data** → ``FileNotFoundError`` naming the source repository, commits, paths and
   the import command (``find_util_data``).
 
@@ -91,9 +91,9 @@ class RecordedWorld:
             pos=np.zeros((n_b, n, 3)), vel=np.zeros((n_b, n, 3)), imu=np.zeros((n_b, n, 3)),
             z=np.zeros((n_b, n, n_l, 3)), valid=np.zeros((n_b, n, n_l), dtype=np.bool_),
             label=np.zeros((n_b, n, n_l), dtype=np.bool_), injected=np.zeros((n_b, n, n_l)),
-            label_v1=np.zeros((n_b, n, n_l), dtype=np.bool_), systematic=np.zeros((n_b, n, n_l, 3)),
+            error_label=np.zeros((n_b, n, n_l), dtype=np.bool_), systematic=np.zeros((n_b, n, n_l, 3)),
         )
-        #: ``(N, L)`` labels v1 threshold per channel (``labels.label_thresholds``)
+        #: ``(N, L)`` error-label threshold per channel (``labels.label_thresholds``)
         self.label_threshold = label_thresholds(self.layout.kind)
         self.seeds = np.zeros(n_b, dtype=np.int64)
         self.x0 = np.zeros((n_b, n, 6))
@@ -125,7 +125,7 @@ class RecordedWorld:
         buf.valid[idx] = False
         buf.label[idx] = False
         buf.injected[idx] = 0.0
-        buf.label_v1[idx] = False
+        buf.error_label[idx] = False
         buf.systematic[idx] = 0.0
         for b in idx:
             seed = int(self.seeds[b])
@@ -152,8 +152,8 @@ class RecordedWorld:
         buf.label[:, 0] = rec.label[k]
         buf.injected[:, 0] = np.abs(rec.residual[k])
         buf.systematic[:, 0, :, 0] = rec.residual[k]
-        # labels v1 (labels.own_sigmas of a range): |e| / σ above the threshold
-        buf.label_v1[:, 0] = rec.valid[k] & (np.abs(rec.residual[k]) / self.layout.sigma[0]
+        # error labels (labels.own_sigmas of a range): |e| / σ above the threshold
+        buf.error_label[:, 0] = rec.valid[k] & (np.abs(rec.residual[k]) / self.layout.sigma[0]
                                              > self.label_threshold[0])
         return buf
 

@@ -29,9 +29,9 @@ in the dataset README (``<data>/util-tdoa/README.md``):
   vehicle; the README computes its residual statistics with it), linearly interpolated;
   velocity the central difference over ±25 ms, as for the TWR flight.
 * **Residual and labels.** A row's residual is its value minus the true range difference
-  at its own arrival time. The labels v0 (``Recording.label``; what the privileged
-  ``oracle-v0`` reads on a real flight) mark |residual| > ``LABEL_SIGMAS_V0``·σ, the
-  simulated world's v0 rule with the residual standing for the injected error; no
+  at its own arrival time. The fault labels (``Recording.label``, the world's
+  ``SenseBuffers.label`` on a real flight) mark |residual| > ``FAULT_LABEL_SIGMAS``·σ, the
+  simulated world's injected-fault rule with the residual standing for the injected error; no
   calibration removes the persistent per-pair offsets (0.1–0.25 m in LOS), which stay
   below that threshold.
 * **IMU input** exactly as for the TWR flight (``util_flight``: AHRS, world acceleration,
@@ -63,8 +63,9 @@ from .util_flight import (
 AIRBORNE_ALTITUDE = 0.3
 #: m, body frame: the UWB tag's offset from the mocap origin (dataset scripts, ``t_uv``)
 TAG_LEVER_ARM = (-0.01245, 0.00127, 0.0908)
-#: labels v0 on a real TDOA flight: |residual| above this many nominal σ
-LABEL_SIGMAS_V0 = 3.0
+#: fault label on a real TDOA flight: |residual| above this many nominal σ (the simulated
+#: world's ``INJECTED_FAULT_SIGMAS``)
+FAULT_LABEL_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -250,7 +251,7 @@ def load_tdoa_recording(folder: Path, log: str, start: float, n_steps: int, dt: 
     z[step[last], channel[last]] = value
     valid[step[last], channel[last]] = True
     residual[step[last], channel[last]] = value - truth_at_arrival
-    label = valid & (np.abs(residual) > LABEL_SIGMAS_V0 * sigma)
+    label = valid & (np.abs(residual) > FAULT_LABEL_SIGMAS * sigma)
     spread = np.zeros(n_l)
     for c in range(n_l):
         e = residual[1:, c][valid[1:, c]]
@@ -267,7 +268,7 @@ def load_tdoa_recording(folder: Path, log: str, start: float, n_steps: int, dt: 
 
 __all__ = [
     "AIRBORNE_ALTITUDE",
-    "LABEL_SIGMAS_V0",
+    "FAULT_LABEL_SIGMAS",
     "TAG_LEVER_ARM",
     "TdoaLog",
     "TdoaRecording",
