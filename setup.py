@@ -20,7 +20,7 @@ from setuptools.warnings import InformationOnly
 # that note is not ours to print.
 warnings.filterwarnings("ignore", message="Editable installation", category=InformationOnly)
 
-ROOMS = ("envs", "agents", "bench", "leaderboard")
+ROOMS = ("envs", "agents", "bench", "leaderboard", "cli")
 
 
 class FreshBuildPy(build_py):

@@ -2,7 +2,7 @@
 
 **Track A — link trust** (:class:`LinkTrustPolicy`). Each step the policy receives, for
 all B episodes at once, the per-channel observation ``(B, N, L, F)`` built by
-``swarmloc.envs.observation.build_observation`` plus the raw fields it is built from
+``swarmloc.envs.world.observation.build_observation`` plus the raw fields it is built from
 (:class:`TrustInput`), and returns the raw trust ``α_raw`` ``(B, N, L)`` in [0, 1]. The
 environment's CEKF applies it (``R = R0 / max(α, α_min)``; channels with ``α ≤ α_th``
 are skipped). A policy declares ``flops_per_channel`` (its cost per present channel per
@@ -12,7 +12,7 @@ step, used by the delay and energy terms) and ``privileged``.
 public facts (:class:`TaskFacts`), then ``step(meas)`` once per filter step with the
 batched measurements (:class:`Measurements`) → :class:`EstimatorOutput` (positions,
 optionally covariances, applied channel weights and FLOPs). Every link-trust policy is
-also an estimator through ``swarmloc.agents.trust_estimator.TrustEstimator``.
+also an estimator through ``swarmloc.agents.estimators.trust_estimator.TrustEstimator``.
 
 **No truth, no labels.** :class:`TaskFacts`, :class:`Measurements` and
 :class:`TrustInput` are frozen dataclasses with ``__slots__`` and no field for the true
@@ -26,7 +26,7 @@ Results of privileged methods are shown apart and never ranked.
 
 **Randomness.** A method that draws random numbers derives them from the per-episode
 ``keys`` it is given (``(B,)`` non-negative int64, one per episode, a one-way hash of
-the episode seed) — e.g. with ``swarmloc.envs.rng.uniform(key, step, Stream.POLICY, i)``
+the episode seed) — e.g. with ``swarmloc.envs.tasks.rng.uniform(key, step, Stream.POLICY, i)``
 — never from a global generator, so an episode gives the same result alone or batched.
 
 Shapes: B episodes, N UAVs, L channels, F features; arrays are numpy, float64 unless
@@ -42,8 +42,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from swarmloc.envs.channels import ChannelLayout
-from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.tasks.channels import ChannelLayout
+from swarmloc.envs.tasks.specs import TaskSpec
 
 
 def _frozen_array(value: np.ndarray | float, dtype=None) -> np.ndarray:
@@ -87,7 +87,7 @@ class TaskFacts:
         duration: episode length [s] (= T·dt).
         n_uav: N.
         kind, target, linked, sigma: ``(N, L)`` static channel layout (see
-            ``swarmloc.envs.channels``): kind id, anchor/UAV/landmark index, whether the
+            ``swarmloc.envs.tasks.channels``): kind id, anchor/UAV/landmark index, whether the
             topology links the slot, nominal noise std per scalar row [m].
         anchors: ``(A, 3)`` anchor positions [m]; landmarks: ``(M, 3)`` landmark positions.
         imu_sigma: nominal accelerometer noise std [m/s²].
@@ -275,7 +275,7 @@ class PrivilegedInfo:
     Attributes:
         labels: ``(B, N, L)`` bool injected-fault labels of the pending measurements (a fault
             the scenario injected: what the detection metrics count, ``SenseBuffers.label``).
-        error_labels: ``(B, N, L)`` bool error labels (``swarmloc.envs.labels``: systematic
+        error_labels: ``(B, N, L)`` bool error labels (``swarmloc.envs.world.labels``: systematic
             error above k·σ_eff). Track A: the core's, peer links included through the
             neighbour's broadcast estimate; Track B: the world's, the measurement's own
             error only (an estimator's estimates are its own). None where not provided.

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Literal
 
-from .protocols import is_deterministic, is_privileged
-from .smoothing import MarkovSmoothing
+from swarmloc.agents.protocols import is_deterministic, is_privileged
+from swarmloc.agents.trust.smoothing import MarkovSmoothing
 
 Track = Literal["A", "B"]
 SMOOTH_SUFFIX = "+smooth"
@@ -63,9 +63,9 @@ class MethodEntry:
     summary: str
 
 
-_A = "swarmloc.agents.classical"
-_M = "swarmloc.agents.mappo_policy"
-_P = "swarmloc.agents.pf.filters"
+_A = "swarmloc.agents.trust.classical"
+_M = "swarmloc.agents.mappo.policy"
+_P = "swarmloc.agents.estimators.pf.filters"
 #: every shipped method, in display order
 REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("uniform", f"{_A}:uniform_policy", "A", False, True, "standard CEKF, α = 1 (score 0)"),
@@ -75,28 +75,28 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("chi2-soft", f"{_A}:chi2_soft_policy", "A", False, True, "exp. down-weighting past χ²₀.₉₅ (dtvirm)"),
     MethodEntry("federated-coef", f"{_A}:federated_coef_policy", "A", False, True,
                 "information-allocation coefficient (federated eq. 17–21)"),
-    MethodEntry("cusum", "swarmloc.agents.integrity:cusum_policy", "A", False, True,
+    MethodEntry("cusum", "swarmloc.agents.trust.integrity:cusum_policy", "A", False, True,
                 "CUSUM per channel on the NIS (λ = 4, ARL₀ = 10⁴), readmits on a reverse CUSUM"),
-    MethodEntry("raim", "swarmloc.agents.integrity:raim_policy", "A", False, True,
+    MethodEntry("raim", "swarmloc.agents.trust.integrity:raim_policy", "A", False, True,
                 "RAIM per UAV: Σ NIS vs χ²₀.₉₉₉, leave-one-out exclusion up to a minority"),
     MethodEntry("non-cooperative", f"{_A}:non_cooperative_policy", "A", False, True,
                 "each UAV alone: peer channels skipped, absolute ones trusted (a shortcut probe)"),
     MethodEntry("random", f"{_A}:random_policy", "A", False, True, "α ~ U(0, 1), seeded (the floor)"),
-    MethodEntry("dead-reckoning", "swarmloc.agents.dead_reckoning:dead_reckoning", "B", False, True,
+    MethodEntry("dead-reckoning", "swarmloc.agents.estimators.dead_reckoning:dead_reckoning", "B", False, True,
                 "IMU only from the initial prior"),
-    MethodEntry("imm-kf", "swarmloc.agents.imm:imm_kf", "B", False, True,
+    MethodEntry("imm-kf", "swarmloc.agents.estimators.imm:imm_kf", "B", False, True,
                 "IMM (CV, CT±) Kalman filter on GPS fixes (imm-arkf Table 1)"),
-    MethodEntry("imm-ekf", "swarmloc.agents.imm:imm_ekf", "B", False, True,
+    MethodEntry("imm-ekf", "swarmloc.agents.estimators.imm:imm_ekf", "B", False, True,
                 "IMM (CV, CT±) EKF on range/bearing of the fix (imm-arkf Table 1)"),
-    MethodEntry("imm-arkf", "swarmloc.agents.imm:imm_arkf", "B", False, True,
+    MethodEntry("imm-arkf", "swarmloc.agents.estimators.imm:imm_arkf", "B", False, True,
                 "IMM adaptive robust KF: correntropy weights + χ² fading factor (imm-arkf §2.3)"),
-    MethodEntry("federated", "swarmloc.agents.federated:federated", "B", False, True,
+    MethodEntry("federated", "swarmloc.agents.estimators.federated:federated", "B", False, True,
                 "adaptive fault-tolerant federated filter (federated §4)"),
-    MethodEntry("federated-fdi", "swarmloc.agents.federated:federated_fdi", "B", False, True,
+    MethodEntry("federated-fdi", "swarmloc.agents.estimators.federated:federated_fdi", "B", False, True,
                 "federated filter, equal allocation + χ² FDI only (federated Scheme 2)"),
-    MethodEntry("ci-ekf", "swarmloc.agents.ci_ekf:ci_ekf", "B", False, True,
+    MethodEntry("ci-ekf", "swarmloc.agents.estimators.ci_ekf:ci_ekf", "B", False, True,
                 "anchor-free CI-EKF + χ² UWB adaptive adjustment, MDS-MAP init (dtvirm)"),
-    MethodEntry("ci-ekf-no-aa", "swarmloc.agents.ci_ekf:ci_ekf_no_aa", "B", False, True,
+    MethodEntry("ci-ekf-no-aa", "swarmloc.agents.estimators.ci_ekf:ci_ekf_no_aa", "B", False, True,
                 "CI-EKF without the UWB adaptive adjustment (dtvirm ablation)"),
     MethodEntry("pf", f"{_P}:make_pf", "B", False, True, "particle filter, 500 particles (pf-nn Table 4)"),
     MethodEntry("pf-800", f"{_P}:make_pf800", "B", False, True, "particle filter, 800 particles"),
@@ -112,7 +112,7 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
     MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A", False, True,
                 "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
-    MethodEntry("mappo-set-gru", "swarmloc.agents.set_gru_policy:mappo_set_gru", "A", False, True,
+    MethodEntry("mappo-set-gru", "swarmloc.agents.mappo.set_gru_policy:mappo_set_gru", "A", False, True,
                 "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True,
                 "privileged: α_min on channels with an error label (the trust ceiling)"),

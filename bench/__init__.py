@@ -21,15 +21,15 @@ from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .evaluation.compare import compare
-    from .evaluation.results import load_results
-    from .evaluation.runner import evaluate, evaluate_task
-    from .evaluation.suites import get_suite
+    from swarmloc.bench.scoring.compare import compare
+    from swarmloc.bench.evaluation.results import load_results
+    from swarmloc.bench.evaluation.runner import evaluate, evaluate_task
+    from swarmloc.bench.evaluation.suites import get_suite
 
 __all__ = ["compare", "evaluate", "evaluate_task", "get_suite", "load_results"]
 
 _HOME = {
-    "compare": ".evaluation.compare",
+    "compare": ".scoring.compare",
     "evaluate": ".evaluation.runner",
     "evaluate_task": ".evaluation.runner",
     "get_suite": ".evaluation.suites",

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from .kernel_cache import guard_kernel_cache
+from swarmloc.envs.world.kernel_cache import guard_kernel_cache
 
 guard_kernel_cache()  # before any numba kernel loads from its disk cache (see kernel_cache)
 
-from .registration import register_tasks  # noqa: E402
-from .tasks import CATALOGUE, UnknownTaskError, canonical_task_id, get_spec  # noqa: E402
+from swarmloc.envs.adapters.registration import register_tasks  # noqa: E402
+from swarmloc.envs.tasks.catalogue import CATALOGUE, UnknownTaskError, canonical_task_id, get_spec  # noqa: E402
 
 TASK_IDS: tuple[str, ...] = tuple(register_tasks())
 
@@ -42,14 +42,14 @@ def make_vec(task_id: str, num_envs: int, **kwargs: Any):
 
 def parallel_env(task_id: str, **kwargs: Any):
     """PettingZoo ``ParallelEnv`` of a swarmloc task, one agent per UAV."""
-    from .pettingzoo_env import parallel_env as _parallel_env
+    from swarmloc.envs.adapters.pettingzoo_env import parallel_env as _parallel_env
 
     return _parallel_env(canonical_task_id(task_id), **kwargs)
 
 
 def env(task_id: str, **kwargs: Any):
     """PettingZoo ``AECEnv`` of a swarmloc task (``parallel_to_aec`` of ``parallel_env``)."""
-    from .pettingzoo_env import env as _env
+    from swarmloc.envs.adapters.pettingzoo_env import env as _env
 
     return _env(canonical_task_id(task_id), **kwargs)
 
@@ -57,7 +57,7 @@ def env(task_id: str, **kwargs: Any):
 def torchrl_env(task_id: str, batch_size: int, device: str = "cpu", **kwargs: Any):
     """Native batched torchrl ``EnvBase`` of a swarmloc task (group ``uav``)."""
     try:
-        from .torchrl_env import make_torchrl_env
+        from swarmloc.envs.adapters.torchrl_env import make_torchrl_env
     except ModuleNotFoundError as err:
         if (err.name or "").split(".")[0] not in ("torch", "tensordict", "torchrl"):
             raise

@@ -19,7 +19,7 @@ class VerificationFailed(SubmissionError):
     """Re-running a sample of the episodes failed or did not reproduce the submitted metrics.
 
     Attributes:
-        report: The :class:`~swarmloc.leaderboard.verify.VerificationReport` when the
+        report: The :class:`~swarmloc.leaderboard.verify.verification.VerificationReport` when the
             re-run finished but metrics differ; ``None`` when the worker failed.
     """
 

@@ -6,9 +6,9 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs.specs import Scoring
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.worlds import data_missing, make_world
+from swarmloc.envs.tasks.specs import Scoring
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.worlds import data_missing, make_world
 
 
 def short(task_id: str, steps: int) -> dict:

@@ -2,7 +2,7 @@
 
 Standard library only. Metrics are a pure function of (task, seed). Like the real
 runner it builds the method by calling its factory — during verification that call goes
-to the method's own sandbox (``swarmloc.leaderboard.method_process``) — so the
+to the method's own sandbox (``swarmloc.bench.evaluation.remote_method``) — so the
 factory's name selects a behaviour, run where the submitted code runs:
 
 * ``good*``    — a method that does nothing; the runner returns the deterministic metrics;

@@ -21,8 +21,8 @@ from swarmloc.bench.evaluation.results import (
     write_results,
 )
 from swarmloc.leaderboard.errors import SandboxUnavailable
-from swarmloc.leaderboard.sandbox import require_sandbox
-from swarmloc.leaderboard.verify import VerifyLimits
+from swarmloc.leaderboard.verify.sandbox import require_sandbox
+from swarmloc.leaderboard.verify.verification import VerifyLimits
 
 TESTS_DIR = Path(__file__).resolve().parent
 TASKS = ("swarmloc/Ideal-v0", "swarmloc/NLOS-v0")

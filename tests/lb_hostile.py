@@ -36,8 +36,8 @@ import pytest
 from lb_helpers import sandbox_unavailable
 
 from swarmloc.bench.evaluation.results import EpisodeMetrics, MethodInfo, SuiteInfo, dumps_results, make_results
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.verify import sample_episodes
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.verify.verification import sample_episodes
 
 SUITE = "standard-v0"
 SAMPLE_SEED = 5
@@ -164,7 +164,7 @@ class Hostile:
         results = write_results(self.folder / "results.json", entry_point, honest=honest, track=track)
         script = Path(sys.executable).parent / "swarmloc"
         command = [str(script)] if script.exists() else [
-            sys.executable, "-c", "import sys; from swarmloc.bench.cli import main; sys.exit(main())"]
+            sys.executable, "-c", "import sys; from swarmloc.cli import main; sys.exit(main())"]
         args = [*command, "submit", str(results), "--db-url", self.db_url, "--seed", str(SAMPLE_SEED),
                 "--sample-frac", "0.001", "--min-episodes", "1", *SUBMIT_LIMITS, *extra]
         env = {k: v for k, v in os.environ.items() if not k.startswith("SWARMLOC_DB")}
@@ -216,7 +216,7 @@ def make():
 def _seed_entry() -> Any:
     from datetime import datetime, timezone
 
-    from swarmloc.leaderboard.records import LeaderboardEntry
+    from swarmloc.leaderboard.store.records import LeaderboardEntry
 
     text = json.dumps({"seed": True})
     return LeaderboardEntry(

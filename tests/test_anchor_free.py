@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from swarmloc.agents.init.initializer import InitConfig, MdsMapInitializer, refine_with_odometry
+from swarmloc.agents.estimators.init.initializer import InitConfig, MdsMapInitializer, refine_with_odometry
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.agents.registry import load_method
 from swarmloc.bench.evaluation.alignment import align_estimates, yaw_translation_fit
 from swarmloc.bench.evaluation.runner import _Recorder, rollout
-from swarmloc.envs.channels import PEER
-from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.channels import PEER
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
+from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/AnchorFree-v0"
 

@@ -31,9 +31,9 @@ from swarmloc.bench.evaluation.backends import (
 from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate, evaluate_methods, partial_path
 from swarmloc.bench.evaluation.suites import Suite
 from swarmloc.leaderboard.errors import VerificationFailed
-from swarmloc.leaderboard.ray_rerun import ray_rerun, split_sample
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.submit import submit
+from swarmloc.leaderboard.verify.ray_rerun import ray_rerun, split_sample
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.submit.pipeline import submit
 
 TESTS = Path(__file__).resolve().parent
 FAULTS = TESTS / "backend_faults.py"
@@ -241,7 +241,7 @@ def test_submit_runs_the_sandboxed_verification_as_ray_tasks(ray_cluster, tmp_pa
 def test_submit_command_refuses_an_address_without_ray(tmp_path: Path) -> None:
     from rich.console import Console
 
-    from swarmloc.bench.cli import submit as submit_command
+    from swarmloc.cli import submit as submit_command
 
     console = Console(record=True, width=200, file=io.StringIO())
     opts = submit_command.Options(results=tmp_path / "r.json", address="auto", db_url=f"sqlite:///{tmp_path / 'x.db'}")

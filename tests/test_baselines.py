@@ -7,7 +7,7 @@ import pytest
 from trust_helpers import trust_input as _input
 from trust_helpers import trust_layout as _layout
 
-from swarmloc.agents.classical import (
+from swarmloc.agents.trust.classical import (
     Chi2GateTrust,
     Chi2SoftTrust,
     FederatedCoefTrust,
@@ -18,10 +18,10 @@ from swarmloc.agents.classical import (
 )
 from swarmloc.agents.protocols import PrivilegedInfo, episode_keys
 from swarmloc.agents.registry import load_method
-from swarmloc.agents.smoothing import MarkovSmoothing, smooth_step
+from swarmloc.agents.trust.smoothing import MarkovSmoothing, smooth_step
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
-from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, ChannelLayout
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, ChannelLayout
+from swarmloc.envs.tasks.catalogue import get_spec
 
 SEEDS = list(range(1_000_000, 1_000_008))
 

@@ -7,17 +7,17 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from swarmloc.bench.evaluation import bounds as BB
+from swarmloc.bench.scoring import bounds as BB
 from swarmloc.bench.evaluation.recorder import EpisodeRecorder
 from swarmloc.bench.evaluation.suites import Suite
-from swarmloc.envs import cekf
-from swarmloc.envs.bound import BoundInputs, BoundRecorder, pcrlb, record_inputs
-from swarmloc.envs.bound_reference import pcrlb_reference
-from swarmloc.envs.cekf_reference import run_reference
-from swarmloc.envs.channels import ANCHOR, GPS, LANDMARK, PEER
-from swarmloc.envs.tasks import SIX_ANCHORS, get_spec
-from swarmloc.envs.trust_env import TrustEnvBatch
-from swarmloc.envs.world import World
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.bound import BoundInputs, BoundRecorder, pcrlb, record_inputs
+from swarmloc.envs.filter.bound_reference import pcrlb_reference
+from swarmloc.envs.filter.cekf_reference import run_reference
+from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER
+from swarmloc.envs.tasks.catalogue import SIX_ANCHORS, get_spec
+from swarmloc.envs.adapters.trust_env import TrustEnvBatch
+from swarmloc.envs.world.sim import World
 
 
 def synthetic(kinds, targets, r0, pos, *, dt=0.1, imu_sigma=0.1, p0=(0.25, 0.04), anchors=SIX_ANCHORS, use=None):

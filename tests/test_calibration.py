@@ -16,7 +16,7 @@ from swarmloc.bench.evaluation.traces import Trace
 from swarmloc.bench.reproduce import calibration as K
 from swarmloc.bench.reproduce import calibration_criteria as C
 from swarmloc.bench.reproduce import calibration_phenomena as P
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 SEEDS = [1_000_000, 1_000_001, 1_000_002]
 SHORT = {"duration": 6.0}
@@ -296,8 +296,8 @@ def test_json_and_markdown_agree(report):
 
 
 def test_the_command_answers_help_and_refuses_bad_input(capsys, tmp_path):
-    from swarmloc.bench.cli import main
-    from swarmloc.bench.cli.reproduce import Calibration
+    from swarmloc.cli import main
+    from swarmloc.cli.reproduce import Calibration
 
     with pytest.raises(SystemExit) as exit_info:
         main(["reproduce", "calibration", "--help"])

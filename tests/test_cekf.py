@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.envs import cekf
-from swarmloc.envs.cekf_reference import predict_reference, run_reference, update_reference
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.worlds import data_missing
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.cekf_reference import predict_reference, run_reference, update_reference
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
+from swarmloc.envs.world.worlds import data_missing
 
 from envs_helpers import record
 
@@ -98,6 +98,6 @@ def test_skipped_channels_cost_no_flops_and_trust_inflates_r():
 
 
 def cekf_predict_flops() -> int:
-    from swarmloc.envs.cost import PREDICT_FLOPS
+    from swarmloc.envs.world.cost import PREDICT_FLOPS
 
     return PREDICT_FLOPS

@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.agents.ci_ekf import CiEkfConfig, CiEkfEstimator, ci_ekf, ci_ekf_no_aa, range_update, velocity_update
+from swarmloc.agents.estimators.ci_ekf import CiEkfConfig, CiEkfEstimator, ci_ekf, ci_ekf_no_aa, range_update, velocity_update
 from swarmloc.agents.protocols import Measurements, TaskFacts, UnsupportedTask, episode_keys
 from swarmloc.bench.evaluation.alignment import align_estimates
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 N = 4
 

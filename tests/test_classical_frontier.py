@@ -7,15 +7,15 @@ import pytest
 from trust_helpers import trust_input as _input
 from trust_helpers import trust_layout as _layout
 
-from swarmloc.agents.integrity import CusumTrust, RaimTrust, admissible, cusum_step
+from swarmloc.agents.trust.integrity import CusumTrust, RaimTrust, admissible, cusum_step
 from swarmloc.agents.protocols import episode_keys
 from swarmloc.agents.registry import REGISTRY, LoadedMethod, load_method
-from swarmloc.agents.trust_estimator import TrustEstimator
+from swarmloc.agents.estimators.trust_estimator import TrustEstimator
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
 from swarmloc.bench.speed.world import UnfusedCore
-from swarmloc.envs.channels import ANCHOR, LANDMARK, PEER, PEER_REL
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.channels import ANCHOR, LANDMARK, PEER, PEER_REL
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.catalogue import get_spec
 
 SEEDS = list(range(1_000_000, 1_000_012))
 

@@ -13,8 +13,8 @@ import numba
 import pytest
 from rich.console import Console
 
-from swarmloc.bench import cli
-from swarmloc.bench.evaluation.demo import PIPE_WIDTH, run_demo
+from swarmloc import cli
+from swarmloc.bench.reports.demo import PIPE_WIDTH, run_demo
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.runner import run_episodes
 from swarmloc.bench.evaluation.suites import Suite
@@ -113,7 +113,7 @@ def test_every_command_parses_its_help(path, module, capsys):
 
 def test_help_and_tasks_import_neither_torch_nor_numba():
     """``swarmloc --help`` and ``swarmloc tasks`` stay light: the heavy modules (Ray too) load only inside handlers."""
-    probe = ("import sys\nfrom swarmloc.bench.cli import main\n"
+    probe = ("import sys\nfrom swarmloc.cli import main\n"
              "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
              "print('HEAVY', sorted(m for m in ('torch', 'numba', 'torchrl', 'tensordict', 'ray') if m in sys.modules))")
     for args in (["--help"], ["tasks"], ["bench", "speed", "--help"], ["train", "mappo", "--help"]):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from swarmloc.bench.cli import compare as cli
-from swarmloc.bench.evaluation.compare import compare
+from swarmloc.cli import compare as cli
+from swarmloc.bench.scoring.compare import compare
 from swarmloc.bench.evaluation.results import EpisodeMetrics, MethodInfo, SuiteInfo, make_results, write_results
-from swarmloc.bench.evaluation.score import separable_ranks, suite_score
+from swarmloc.bench.scoring.score import separable_ranks, suite_score
 
 SUITE = SuiteInfo(name="tiny", version="1", sha256="0" * 64)
 

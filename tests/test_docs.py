@@ -185,7 +185,7 @@ def test_docs_name_modules_and_files_that_exist():
 
 
 def test_task_table_matches_the_catalogue():
-    from swarmloc.envs.tasks import CATALOGUE, get_spec
+    from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 
     text = (DOCS / "tasks.md").read_text(encoding="utf-8")
     rows = re.findall(r"^\| \[`(swarmloc/[\w-]+)`\]\(tasks/(\w+)\.md\) \| (\d+) \| (\d+) \| ([\d.]+) \| (\d+) \|",
@@ -217,9 +217,9 @@ def test_citation_cff_describes_this_package():
 
 @pytest.mark.parametrize("page", ["reward.md", "world.md"])
 def test_quoted_constants_are_the_code_defaults(page):
-    from swarmloc.envs.cost import DEFAULT_PROFILE, PREDICT_FLOPS, RANGE_ROW_FLOPS, VECTOR_ROW_FLOPS
-    from swarmloc.envs.reward import STANDARD_WEIGHTS
-    from swarmloc.envs.specs import FilterSettings
+    from swarmloc.envs.world.cost import DEFAULT_PROFILE, PREDICT_FLOPS, RANGE_ROW_FLOPS, VECTOR_ROW_FLOPS
+    from swarmloc.envs.world.reward import STANDARD_WEIGHTS
+    from swarmloc.envs.tasks.specs import FilterSettings
 
     text = (DOCS / page).read_text(encoding="utf-8")
     if page == "reward.md":

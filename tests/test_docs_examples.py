@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from swarmloc.bench.cli import COMMANDS, main
+from swarmloc.cli import COMMANDS, main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -214,11 +214,11 @@ def test_the_readme_is_a_front_door() -> None:
 
 
 def test_the_readme_leaderboard_is_the_shipped_one() -> None:
-    from swarmloc.bench.cli.docs_readme import leaderboard_block, with_leaderboard
+    from swarmloc.cli.docs_readme import leaderboard_block, with_leaderboard
 
     text = README.read_text(encoding="utf-8")
     block = leaderboard_block()
     assert "mappo-set-gru" in block and "uniform" in block
     assert with_leaderboard(text, block) == text, (
-        "README.md's leaderboard differs from the shipped results in leaderboard/results/standard-v1/; "
+        "README.md's leaderboard differs from the shipped results in bench/results/standard-v1/; "
         "run `swarmloc docs readme` (or `make docs`)")

@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import swarmloc.envs  # noqa: F401  (registers the tasks)
-from swarmloc.envs.tasks import CATALOGUE, get_spec
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 
 from envs_helpers import assert_same, short, skip_without_data
 

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import swarmloc.envs  # noqa: F401
-from swarmloc.envs.channels import KIND_DIM, N_KINDS
-from swarmloc.envs.observation import KIND0, NIS, SCALE_NIS, unsquash
+from swarmloc.envs.tasks.channels import KIND_DIM, N_KINDS
+from swarmloc.envs.world.observation import KIND0, NIS, SCALE_NIS, unsquash
 
 #: chi-square quantiles for 1 (range) and 3 (3-vector) degrees of freedom
 CHI2_95 = (3.841, 7.815)

@@ -8,7 +8,7 @@ import pytest
 from pettingzoo.test import api_test, parallel_api_test
 
 import swarmloc.envs
-from swarmloc.envs.tasks import CATALOGUE
+from swarmloc.envs.tasks.catalogue import CATALOGUE
 
 from envs_helpers import assert_same, short, skip_without_data
 

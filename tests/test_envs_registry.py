@@ -12,11 +12,11 @@ import gymnasium as gym
 import pytest
 
 import swarmloc.envs
-from swarmloc.envs.docgen import task_pages
-from swarmloc.envs.gym_env import SwarmLocEnv
-from swarmloc.envs.task_docs import SECTIONS
-from swarmloc.envs.task_envs import TASK_CLASSES
-from swarmloc.envs.tasks import CATALOGUE
+from swarmloc.envs.tasks.docgen import task_pages
+from swarmloc.envs.adapters.gym_env import SwarmLocEnv
+from swarmloc.envs.tasks.docs import SECTIONS
+from swarmloc.envs.adapters.task_envs import TASK_CLASSES
+from swarmloc.envs.tasks.catalogue import CATALOGUE
 
 REPO = Path(__file__).resolve().parents[1]
 REGISTERED = sorted(i for i in gym.registry if i.startswith("swarmloc/"))
@@ -63,7 +63,7 @@ def test_generated_docs_are_committed_and_current():
     assert len(pages) == len(CATALOGUE) + 1
     for name, text in pages.items():
         path = REPO / "docs" / "tasks" / name
-        assert path.exists(), f"{path} missing: run python -m swarmloc.envs.docgen docs/tasks"
+        assert path.exists(), f"{path} missing: run python -m swarmloc.envs.tasks.docgen docs/tasks"
         assert path.read_text(encoding="utf-8") == text, f"{path} is stale: rerun the docs generator"
 
 

@@ -9,8 +9,8 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 import swarmloc.envs
-from swarmloc.envs.tasks import CATALOGUE
-from swarmloc.envs.torchrl_env import SwarmLocTorchRLEnv
+from swarmloc.envs.tasks.catalogue import CATALOGUE
+from swarmloc.envs.adapters.torchrl_env import SwarmLocTorchRLEnv
 
 from envs_helpers import short, skip_without_data
 

@@ -8,8 +8,8 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import swarmloc.envs  # noqa: F401
-from swarmloc.envs.tasks import CATALOGUE
-from swarmloc.envs.vector_env import SwarmLocVectorEnv
+from swarmloc.envs.tasks.catalogue import CATALOGUE
+from swarmloc.envs.adapters.vector_env import SwarmLocVectorEnv
 
 from envs_helpers import short, skip_without_data
 

@@ -14,14 +14,14 @@ import torch
 
 pytest.importorskip("captum")
 
-from swarmloc.agents.mappo_policy import ChannelActor, MappoPolicy, weights_kinds
+from swarmloc.agents.mappo.policy import ChannelActor, MappoPolicy, weights_kinds
 from swarmloc.agents.registry import WEIGHTS_DIR, LoadedMethod, load_method
 from swarmloc.bench.explain import attribute, explain, replay
 from swarmloc.bench.explain.features import FEATURE_GROUP, GROUP_NAMES
 from swarmloc.bench.explain.report import summarize
-from swarmloc.envs.observation import NIS, SCALE_NIS, unsquash
-from swarmloc.envs.specs import Faults, NlosStep, Scoring
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.world.observation import NIS, SCALE_NIS, unsquash
+from swarmloc.envs.tasks.specs import Faults, NlosStep, Scoring
+from swarmloc.envs.tasks.catalogue import get_spec
 
 SEED = 1_000_000
 
@@ -193,7 +193,7 @@ def test_refuses_what_it_cannot_explain(spec, mappo_episode):
 
 
 def test_cli_writes_figure_summary_and_arrays(tmp_path, capsys):
-    from swarmloc.bench.cli import main
+    from swarmloc.cli import main
 
     out = tmp_path / "ex"
     rc = main(["explain", "--method", "chi2-gate", "--duration", "21", "--channels", "0", "1", "--samples", "3",
@@ -213,15 +213,16 @@ def test_leaderboard_method_pages_link_their_explanation(tmp_path, monkeypatch):
     """The site explains shipped Track A methods on the step-NLOS task and links it; Track B pages have none."""
     import shutil
 
-    from swarmloc.leaderboard import site_explain
-    from swarmloc.leaderboard.shipped import RESULTS_DIR, load_shipped
-    from swarmloc.leaderboard.store import LeaderboardStore
-    from swarmloc.leaderboard.views import render_html
+    from swarmloc.leaderboard.site import explain as site_explain
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
+    from swarmloc.leaderboard.store.shipped import load_shipped
+    from swarmloc.leaderboard.store.database import LeaderboardStore
+    from swarmloc.leaderboard.site.views import render_html
 
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     for name in ("chi2-gate", "dead-reckoning"):
-        shutil.copy(RESULTS_DIR / f"{name}.json", shipped / f"{name}.json")
+        shutil.copy(RESULTS_DIRS["standard-v0"] / f"{name}.json", shipped / f"{name}.json")
     monkeypatch.setattr(site_explain, "EXPLAIN_DURATION", 26.0)  # NLOSStep-v1: the biases ramp in over 20–25 s
     with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as store:
         assert load_shipped(store, shipped).stored == ("chi2-gate", "dead-reckoning")

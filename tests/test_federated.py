@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.agents.federated import (
+from swarmloc.agents.estimators.federated import (
     FederatedConfig,
     FederatedEstimator,
     federated,
@@ -13,10 +13,10 @@ from swarmloc.agents.federated import (
     federated_fdi,
     imu_prediction,
 )
-from swarmloc.agents.fusion import chi2_threshold
+from swarmloc.agents.estimators.fusion import chi2_threshold
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 T_D = chi2_threshold(0.01, 3)
 

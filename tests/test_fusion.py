@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.agents.fusion import (
+from swarmloc.agents.estimators.fusion import (
     adapted_noise,
     allocation_coefficients,
     chi2_fault_test,

@@ -11,13 +11,13 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs.channels import GPS
-from swarmloc.envs.labels_reference import own_error_labels_reference
-from swarmloc.envs.rng import Stream, normal, uniform
-from swarmloc.envs.specs import HybridNoise
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
-from swarmloc.envs.world_kernel import SERIAL_BELOW
+from swarmloc.envs.tasks.channels import GPS
+from swarmloc.envs.world.labels_reference import own_error_labels_reference
+from swarmloc.envs.tasks.rng import Stream, normal, uniform
+from swarmloc.envs.tasks.specs import HybridNoise
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
+from swarmloc.envs.world.sim_kernel import SERIAL_BELOW
 
 FOLLOWERS = list(range(1, 9))
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.agents.imm import (
+from swarmloc.agents.estimators.imm import (
     ImmConfig,
     ImmEstimator,
     ImmState,
@@ -18,8 +18,8 @@ from swarmloc.agents.imm import (
     transition_matrices,
 )
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 W = 2.0 * math.pi / 180.0
 

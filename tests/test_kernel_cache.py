@@ -1,4 +1,4 @@
-"""The numba cache guard (``envs/kernel_cache.py``): an edited callee never leaves a stale cached caller."""
+"""The numba cache guard (``envs/world/kernel_cache.py``): an edited callee never leaves a stale cached caller."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from swarmloc.envs.kernel_cache import STAMP_NAME, drop_stale_kernel_cache, kernel_sources
+from swarmloc.envs.world.kernel_cache import STAMP_NAME, drop_stale_kernel_cache, kernel_sources
 
 CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef f(x):\n    return x + {offset}\n"
 CALLER = "from numba import njit\n\nfrom .callee import f\n\n\n@njit(cache=True)\ndef g(x):\n    return f(x) * 2.0\n"
@@ -77,6 +77,6 @@ def test_kernel_sources_follow_imports_across_the_packages():
     """Kernels freeze imported globals (channel kinds, RNG streams) into their code: those modules count."""
     root = Path(__file__).resolve().parents[1]
     found = {p.relative_to(root).as_posix() for p in kernel_sources([root / "envs", root / "agents"])}
-    assert {"envs/cekf.py", "envs/world_kernel.py", "agents/pf/core.py", "agents/integrity.py"} <= found
-    assert {"envs/channels.py", "envs/rng.py", "agents/protocols.py"} <= found  # imported by kernels
-    assert not {"envs/tasks.py", "envs/kernel_cache.py", "bench/evaluation/runner.py"} & found
+    assert {"envs/filter/cekf.py", "envs/world/sim_kernel.py", "agents/estimators/pf/core.py", "agents/trust/integrity.py"} <= found
+    assert {"envs/tasks/channels.py", "envs/tasks/rng.py", "agents/protocols.py"} <= found  # imported by kernels
+    assert not {"envs/tasks/catalogue.py", "envs/world/kernel_cache.py", "bench/evaluation/runner.py"} & found

@@ -8,17 +8,17 @@ import json
 import numpy as np
 import pytest
 
-from swarmloc.envs.channels import GPS, PEER, PEER_REL
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.labels import LABEL_SIGMAS, VECTOR_LABEL_SIGMAS, equivalent_radius, label_thresholds
-from swarmloc.envs.labels_reference import (
+from swarmloc.envs.tasks.channels import GPS, PEER, PEER_REL
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.world.labels import LABEL_SIGMAS, VECTOR_LABEL_SIGMAS, equivalent_radius, label_thresholds
+from swarmloc.envs.world.labels_reference import (
     error_labels_reference,
     own_error_labels_reference,
     systematic_sigmas_reference,
 )
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.trust_env import TrustEnvBatch
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.adapters.trust_env import TrustEnvBatch
+from swarmloc.envs.world.sim import World
 
 SEEDS = [1_000_000, 5, 2**40]
 #: between them every channel kind and every systematic error: NLOS ranges (Gauss–Markov and
@@ -192,7 +192,7 @@ def test_v0_numbers_reproduce_shipped_episodes_exactly():
     the metrics that read the injected-fault labels (``anomaly_detection_rate``, ``fault_rmse``) included
     (the ``bound_rmse`` to 1e-12; the retired ``normalized_score`` is no longer computed)."""
     from swarmloc.bench.evaluation.runner import run_episodes
-    from swarmloc.leaderboard.shipped import RESULTS_DIRS
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
     path = RESULTS_DIRS["standard-v0"] / "chi2-gate.json"
     shipped = {(e["task"], e["seed"]): e["metrics"] for e in json.loads(path.read_text())["episodes"]}
@@ -212,7 +212,7 @@ def test_v0_numbers_reproduce_shipped_episodes_exactly():
 
 def test_calibration_report_verdicts():
     """The report's per-task verdicts: worse than the best shipped method, below the bound, CascadedFault."""
-    from swarmloc.bench.cli import COMMANDS, load_command
+    from swarmloc.cli import COMMANDS, load_command
     from swarmloc.bench.reproduce.labels import failures, has_vector_channels, task_summary
 
     assert load_command(COMMANDS["reproduce"]["labels"]).Options().seeds == 32

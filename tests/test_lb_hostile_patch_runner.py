@@ -22,9 +22,9 @@ def test_patching_the_runner_changes_nothing_outside_the_method(tmp_path: Path) 
     lb_hostile.require_sandbox()
     hostile = lb_hostile.Hostile.create(tmp_path)
     entry = hostile.method("""
-        import swarmloc.bench.evaluation.metrics as M
+        import swarmloc.bench.scoring.metrics as M
         import swarmloc.bench.evaluation.runner as R
-        import swarmloc.leaderboard.verify_worker as W
+        import swarmloc.leaderboard.verify.worker as W
         R.run_episodes = R.evaluate_task = lambda *a, **k: []
         M.team_return = lambda *a, **k: 0.99
         W._respond = lambda *a, **k: None

@@ -14,7 +14,7 @@ from pathlib import Path
 import lb_hostile
 import pytest
 
-from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.store.database import LeaderboardStore
 
 pytestmark = pytest.mark.slow
 

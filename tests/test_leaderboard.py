@@ -18,11 +18,11 @@ import lb_helpers as H
 import pytest
 from rich.console import Console
 
-from swarmloc.bench.cli import leaderboard_export, leaderboard_html, leaderboard_show
-from swarmloc.bench.cli import submit as submit_command
-from swarmloc.leaderboard import store as store_module
-from swarmloc.leaderboard import views
-from swarmloc.leaderboard.entry_points import parse_entry_point
+from swarmloc.cli import leaderboard_export, leaderboard_html, leaderboard_show
+from swarmloc.cli import submit as submit_command
+from swarmloc.leaderboard.store import database as store_module
+from swarmloc.leaderboard.site import views
+from swarmloc.leaderboard.submit.entry_points import parse_entry_point
 from swarmloc.leaderboard.errors import (
     DuplicateSubmission,
     InvalidSubmission,
@@ -30,9 +30,9 @@ from swarmloc.leaderboard.errors import (
     SubmissionError,
     VerificationFailed,
 )
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.submit import submit
-from swarmloc.leaderboard.verify import (
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.submit.pipeline import submit
+from swarmloc.leaderboard.verify.verification import (
     Tolerance,
     VerifyLimits,
     sample_episodes,
@@ -100,7 +100,7 @@ def test_valid_submission_is_accepted_and_ranked(tmp_path: Path) -> None:
 
 def test_the_entry_score_is_the_score_the_board_ranks_by(tmp_path: Path) -> None:
     """``entry.score`` is the score (S, log2 gain over uniform), the one ``Standing.score`` ranks by."""
-    from swarmloc.leaderboard.ranking import suite_board
+    from swarmloc.leaderboard.site.ranking import suite_board
 
     url = f"sqlite:///{tmp_path / 'lb.db'}"
     gains = {"low": -0.3, "high": 0.4, "mid": 0.0}
@@ -253,7 +253,7 @@ def test_bad_metadata_is_rejected(meta: dict, message: str, db_url: str, tmp_pat
 def test_default_lookup_uses_the_bench_suite_registry(tmp_path: Path) -> None:
     suites = pytest.importorskip("swarmloc.bench.evaluation.suites")
     from swarmloc.bench.evaluation.results import load_results, write_results
-    from swarmloc.leaderboard.schema import make_submission, validate_submission
+    from swarmloc.leaderboard.store.schema import make_submission, validate_submission
 
     quick = suites.get_suite("quick")
     path = H.make_results_file(tmp_path / "q.json", "lb_fake_runner:good_quick",
@@ -328,7 +328,7 @@ def test_nondeterministic_methods_get_a_tolerance(db_url: str, tmp_path: Path) -
 
 def test_every_metric_has_physical_bounds() -> None:
     from swarmloc.bench.evaluation.results import METRIC_NAMES
-    from swarmloc.leaderboard.schema import METRIC_BOUNDS
+    from swarmloc.leaderboard.store.schema import METRIC_BOUNDS
 
     assert set(METRIC_BOUNDS) == set(METRIC_NAMES)
     assert all(low < high for low, high in METRIC_BOUNDS.values())
@@ -336,7 +336,7 @@ def test_every_metric_has_physical_bounds() -> None:
 
 def test_verification_compares_only_the_metrics_of_the_files_schema() -> None:
     from swarmloc.bench.evaluation import results as R
-    from swarmloc.leaderboard.verify import EXACT, compare_episodes
+    from swarmloc.leaderboard.verify.verification import EXACT, compare_episodes
 
     metrics = R.EpisodeMetrics.of(rmse=1.0, team_return=2.0)
     results = R.make_results(
@@ -363,7 +363,7 @@ def test_sampler_is_seeded_and_sized() -> None:
 def test_out_of_memory_is_recognized_in_its_disguises() -> None:
     import errno
 
-    from swarmloc.leaderboard.verify_worker import is_out_of_memory
+    from swarmloc.bench.evaluation.process_limits import is_out_of_memory
 
     assert is_out_of_memory(MemoryError())
     assert is_out_of_memory(OSError(errno.ENOMEM, "Cannot allocate memory"))
@@ -425,7 +425,7 @@ def test_store_location_env_var_and_default(tmp_path: Path, monkeypatch: pytest.
 
 
 def test_script_in_name_is_escaped_in_html(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "swarmloc.bench.evaluation.plots", None)  # no plot function yet
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.reports.plots", None)  # no plot function yet
     evil = '<script>alert("x")</script>'
     path = H.make_results_file(tmp_path / "x.json", "lb_fake_runner:good_xss")
     receipt = _submit(path, "lb_fake_runner:good_xss", db_url, {
@@ -457,7 +457,7 @@ def test_method_page_embeds_plots_when_bench_provides_them(
         target.write_bytes(b"\x89PNG\r\n\x1a\n")
         return [target]
 
-    monkeypatch.setitem(sys.modules, "swarmloc.bench.evaluation.plots",
+    monkeypatch.setitem(sys.modules, "swarmloc.bench.reports.plots",
                         types.SimpleNamespace(plot_results=plot_results))
     site = tmp_path / "site"
     views.render_html(LeaderboardStore(db_url), site)
@@ -518,7 +518,7 @@ def _null_on(task: str, seeds: tuple[int, ...]):
 
 def test_partial_coverage_is_accepted_but_half_run_tasks_are_not(tmp_path: Path) -> None:
     """A method that cannot run a task (null on all its seeds) is valid; one that ran some seeds only is not."""
-    from swarmloc.leaderboard.schema import make_submission, validate_submission
+    from swarmloc.leaderboard.store.schema import make_submission, validate_submission
 
     whole = H.make_results_file(tmp_path / "p.json", metrics_edit=_null_on("swarmloc/NLOS-v0", H.SEEDS))
     validated = validate_submission(make_submission(whole, "lb_fake_runner:good", META), H.suite_lookup)
@@ -532,7 +532,7 @@ def test_partial_coverage_is_accepted_but_half_run_tasks_are_not(tmp_path: Path)
 
 
 def test_a_forged_score_block_is_refused(tmp_path: Path) -> None:
-    from swarmloc.leaderboard.schema import make_submission, validate_submission
+    from swarmloc.leaderboard.store.schema import make_submission, validate_submission
 
     def with_uniform(t: str, s: int, values: dict[str, Any]) -> None:
         values["uniform_rmse"] = 2.0 * values["rmse"]

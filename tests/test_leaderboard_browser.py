@@ -11,10 +11,10 @@ from pathlib import Path
 import lb_helpers as H
 import pytest
 
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.submit import submit
-from swarmloc.leaderboard.verify import Tolerance
-from swarmloc.leaderboard.views import render_html
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.submit.pipeline import submit
+from swarmloc.leaderboard.verify.verification import Tolerance
+from swarmloc.leaderboard.site.views import render_html
 
 pytestmark = pytest.mark.browser
 

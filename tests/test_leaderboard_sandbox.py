@@ -11,11 +11,11 @@ import lb_helpers as H
 import numpy as np
 import pytest
 
-from swarmloc.leaderboard import sandbox
+from swarmloc.leaderboard.verify import sandbox
 from swarmloc.leaderboard.errors import SandboxUnavailable
-from swarmloc.leaderboard.method_process import MethodProtocolError, decode_reply, encode_reply
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.submit import submit
+from swarmloc.bench.evaluation.remote_method import MethodProtocolError, decode_reply, encode_reply
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.submit.pipeline import submit
 
 
 def test_without_bubblewrap_submit_refuses_and_names_the_opt_in(tmp_path: Path,
@@ -71,7 +71,7 @@ def test_the_view_holds_python_swarmloc_and_the_extras_only(tmp_path: Path) -> N
 def test_limits_are_validated() -> None:
     with pytest.raises(ValueError, match="tmp_bytes must be at least 1 MiB, got 10"):
         sandbox.SandboxLimits(tmp_bytes=10)
-    from swarmloc.leaderboard.verify import VerifyLimits
+    from swarmloc.leaderboard.verify.verification import VerifyLimits
 
     with pytest.raises(ValueError, match="max_processes must be at least 16, got 2"):
         VerifyLimits(max_processes=2)

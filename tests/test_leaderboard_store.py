@@ -26,11 +26,11 @@ from sqlalchemy import MetaData, create_engine, event, inspect, select
 from sqlalchemy.orm import Session
 
 from swarmloc.bench.evaluation.results import Aggregate
-from swarmloc.leaderboard import store as store_module
+from swarmloc.leaderboard.store import database as store_module
 from swarmloc.leaderboard.errors import DuplicateSubmission, StoreError, VerificationFailed
-from swarmloc.leaderboard.records import EntryScore, LeaderboardEntry
-from swarmloc.leaderboard.store import LeaderboardStore
-from swarmloc.leaderboard.submit import submit
+from swarmloc.leaderboard.store.records import EntryScore, LeaderboardEntry
+from swarmloc.leaderboard.store.database import LeaderboardStore
+from swarmloc.leaderboard.submit.pipeline import submit
 
 
 @pytest.fixture(scope="module")
@@ -204,8 +204,8 @@ CONCURRENT_SUBMIT = textwrap.dedent(
     sys.path.insert(0, {tests!r})
     import lb_helpers as H
     from swarmloc.leaderboard.errors import DuplicateSubmission
-    from swarmloc.leaderboard.store import LeaderboardStore
-    from swarmloc.leaderboard.submit import submit
+    from swarmloc.leaderboard.store.database import LeaderboardStore
+    from swarmloc.leaderboard.submit.pipeline import submit
     url, path, entry, name, start, extra = sys.argv[1:7]
     time.sleep(max(0.0, float(start) - time.time()))
     try:
@@ -267,7 +267,7 @@ def test_the_same_method_submitted_twice_at_once_lands_once(empty_url: str, tmp_
 OPEN_STORE = textwrap.dedent(
     """
     import sys, time
-    from swarmloc.leaderboard.store import LeaderboardStore
+    from swarmloc.leaderboard.store.database import LeaderboardStore
     time.sleep(max(0.0, float(sys.argv[2]) - time.time()))
     with LeaderboardStore(sys.argv[1]) as store:
         print(store.schema_version(), store.count())

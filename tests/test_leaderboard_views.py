@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from swarmloc.bench.cli import leaderboard_show
-from swarmloc.bench.evaluation.families import FAMILY_ORDER, group_by_family, task_base, task_family
-from swarmloc.bench.evaluation.method_style import KNOWN_METHODS, method_style, method_styles
+from swarmloc.cli import leaderboard_show
+from swarmloc.bench.scoring.families import FAMILY_ORDER, group_by_family, task_base, task_family
+from swarmloc.bench.reports.method_style import KNOWN_METHODS, method_style, method_styles
 from swarmloc.bench.evaluation.results import (
     EpisodeMetrics,
     MethodInfo,
@@ -27,12 +27,12 @@ from swarmloc.bench.evaluation.results import (
     make_results,
     suite_sha256,
 )
-from swarmloc.leaderboard import views
-from swarmloc.leaderboard.ranking import suite_boards
-from swarmloc.leaderboard.records import LeaderboardEntry
-from swarmloc.leaderboard.store import LeaderboardStore
+from swarmloc.leaderboard.site import views
+from swarmloc.leaderboard.site.ranking import suite_boards
+from swarmloc.leaderboard.store.records import LeaderboardEntry
+from swarmloc.leaderboard.store.database import LeaderboardStore
 
-RESULTS_DIR = Path(__file__).resolve().parents[1] / "leaderboard" / "results"
+RESULTS_DIR = Path(__file__).resolve().parents[1] / "bench" / "results" / "standard-v0"
 T0 = datetime(2026, 1, 1, tzinfo=timezone.utc)
 
 
@@ -248,7 +248,7 @@ def test_site_draws_the_gap_heatmap_when_a_bound_exists_and_names_are_plain_text
 
 
 def test_every_registered_task_has_a_named_family() -> None:
-    from swarmloc.envs.tasks import CATALOGUE
+    from swarmloc.envs.tasks.catalogue import CATALOGUE
 
     families = {task: task_family(task) for task in CATALOGUE}
     assert set(families.values()) <= set(FAMILY_ORDER)

@@ -12,7 +12,7 @@ import pytest
 import torch
 from trust_helpers import obs_input
 
-from swarmloc.agents.mappo_policy import (
+from swarmloc.agents.mappo.policy import (
     WEIGHTS_DIR,
     ChannelActor,
     MappoPolicy,
@@ -20,8 +20,8 @@ from swarmloc.agents.mappo_policy import (
     load_actor,
 )
 from swarmloc.agents.registry import load_method
-from swarmloc.agents.smoothing import MarkovSmoothing
-from swarmloc.envs.observation import N_FEATURES, VALID
+from swarmloc.agents.trust.smoothing import MarkovSmoothing
+from swarmloc.envs.world.observation import N_FEATURES, VALID
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = WEIGHTS_DIR / "mappo.pt"
@@ -34,7 +34,7 @@ def _random_obs(rng: np.random.Generator, b: int, n: int, n_l: int) -> np.ndarra
 
 
 def _tiny_config(tmp_path: Path, **kw):
-    from swarmloc.agents.mappo import MappoConfig
+    from swarmloc.agents.mappo.train import MappoConfig
 
     base = dict(tasks=("CascadedFault-v0",), frames=400, num_envs=4, rollout_steps=100, epochs=1, minibatches=2,
                 run_dir=str(tmp_path), progress=False, eval_every=0, checkpoint_every=0)
@@ -91,7 +91,7 @@ def test_policy_runs_on_tasks_of_different_shapes():
     """The same weights run through the runner on Scale2 and Scale8 (short episodes)."""
     from swarmloc.agents.registry import LoadedMethod
     from swarmloc.bench.evaluation.runner import rollout
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     torch.manual_seed(0)
     for task in ("Scale2-v0", "Scale8-v0"):
@@ -103,7 +103,7 @@ def test_policy_runs_on_tasks_of_different_shapes():
 
 def test_critic_permutation_invariant_over_uavs():
     """Permuting the UAVs (and every UAV's peer channels) permutes the per-UAV values; the swarm mean is unchanged."""
-    from swarmloc.agents.mappo_nets import SwarmCritic
+    from swarmloc.agents.mappo.nets import SwarmCritic
 
     torch.manual_seed(0)
     n, n_anchor = 5, 3
@@ -160,7 +160,7 @@ def test_shipped_weights_load_and_give_trust_in_unit_interval():
     """``mappo`` and its ablations load without training and output α in (0, 1] on a real task."""
     from swarmloc.agents.registry import get_entry
     from swarmloc.bench.evaluation.runner import rollout
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     meta = json.loads(SHIPPED.with_suffix(".json").read_text())
     assert {"command", "frames", "wall_time_s", "git_commit"} <= set(meta)
@@ -185,7 +185,7 @@ def test_shipped_weights_load_and_give_trust_in_unit_interval():
 
 
 def _layout(n: int, n_l: int):
-    from swarmloc.envs.channels import ChannelLayout
+    from swarmloc.envs.tasks.channels import ChannelLayout
 
     zeros = np.zeros((n, n_l), dtype=np.int64)
     return ChannelLayout(kind=zeros, target=zeros, linked=np.ones((n, n_l), bool), sigma=np.ones((n, n_l)))
@@ -197,7 +197,7 @@ def test_missing_weights_give_a_clear_error(tmp_path):
 
 
 def test_training_refuses_test_and_dev_seeds(tmp_path):
-    from swarmloc.agents.mappo import EpisodeSeeds, train
+    from swarmloc.agents.mappo.train import EpisodeSeeds, train
     from swarmloc.bench.evaluation.suites import check_training_seeds
     from swarmloc.bench.training.mappo import TrainMappoArgs, train_mappo
 
@@ -215,7 +215,7 @@ def test_training_refuses_test_and_dev_seeds(tmp_path):
 
 
 def test_training_is_deterministic_given_a_seed(tmp_path):
-    from swarmloc.agents.mappo import train
+    from swarmloc.agents.mappo.train import train
 
     runs = [train(_tiny_config(tmp_path / str(i), seed=seed)) for i, seed in enumerate((5, 5, 6))]
     a, b, c = (r.actor_state for r in runs)
@@ -249,16 +249,16 @@ def test_reproduce_madrl_names_the_tasks_of_its_version():
 
 
 def test_cli_registers_train_mappo_and_reproduce_madrl():
-    from swarmloc.bench.cli import COMMANDS
+    from swarmloc.cli import COMMANDS
 
     assert "mappo" in COMMANDS["train"] and "madrl" in COMMANDS["reproduce"]
 
 
 def test_loop_smoother_equals_execution_smoothing():
     """The training-time smoother applies exactly ``smooth_step`` (madrl eq. 15–17), state per task."""
-    from swarmloc.agents.mappo_nets import LoopSmoother
-    from swarmloc.agents.smoothing import smooth_step
-    from swarmloc.envs.observation import INNOVATION, SCALE_INNOVATION, squash
+    from swarmloc.agents.mappo.nets import LoopSmoother
+    from swarmloc.agents.trust.smoothing import smooth_step
+    from swarmloc.envs.world.observation import INNOVATION, SCALE_INNOVATION, squash
 
     rng = np.random.default_rng(5)
     shape = (3, 4, 6)
@@ -293,7 +293,7 @@ def test_smoothing_keeps_the_total_variation_of_a_step():
     """Why smoothing cannot cut the jitter of a clean switching policy: a first-order low-pass
     moves α_eff monotonically towards a held α_raw (a convex combination), so a step's
     Σ|Δα| is kept, only spread in time; only oscillation is removed."""
-    from swarmloc.agents.smoothing import smooth_step
+    from swarmloc.agents.trust.smoothing import smooth_step
 
     raw = np.r_[np.ones(20), np.full(60, 0.05), np.ones(60)]
     resid = np.r_[np.full(20, 0.1), np.full(60, 3.0), np.full(60, 0.1)]
@@ -315,9 +315,9 @@ def test_smoothing_keeps_the_total_variation_of_a_step():
 
 def test_channel_kinds_outside_training_get_nominal_trust():
     """Channels of kinds the weights never saw in training (from their record) get α = 1."""
-    from swarmloc.agents.mappo_policy import trained_kinds, weights_kinds
-    from swarmloc.envs.channels import ANCHOR, GPS, N_KINDS, PEER, PEER_REL
-    from swarmloc.envs.observation import KIND0
+    from swarmloc.agents.mappo.policy import trained_kinds, weights_kinds
+    from swarmloc.envs.tasks.channels import ANCHOR, GPS, N_KINDS, PEER, PEER_REL
+    from swarmloc.envs.world.observation import KIND0
 
     np.testing.assert_array_equal(trained_kinds(["NLOS-v0", "Scale2-v0"]), np.eye(N_KINDS, dtype=bool)[[ANCHOR, PEER]].any(0))
     assert trained_kinds(["GradualFault-v0"])[[GPS, PEER_REL]].all()
@@ -345,8 +345,8 @@ def test_channel_kinds_outside_training_get_nominal_trust():
 @pytest.mark.parametrize("name", ["mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only"])
 def test_each_benchmark_version_gets_the_weights_trained_on_its_tasks(name):
     """v0 tasks run the frozen v0 weights, v1 tasks (and no version: the newest) the ones trained on v1."""
-    from swarmloc.agents.mappo_policy import SHIPPED as SHIPPED_FILES
-    from swarmloc.agents.mappo_policy import shipped_weights, weights_metadata
+    from swarmloc.agents.mappo.policy import SHIPPED as SHIPPED_FILES
+    from swarmloc.agents.mappo.policy import shipped_weights, weights_metadata
 
     family = "mappo-accuracy-only" if name == "mappo-accuracy-only" else "mappo"
     for version, file in SHIPPED_FILES[family].items():

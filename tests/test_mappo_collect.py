@@ -12,9 +12,9 @@ import pytest
 import ray
 import torch
 
-from swarmloc.agents.mappo import MappoConfig, train
-from swarmloc.agents.mappo_collect import Collection
-from swarmloc.agents.mappo_nets import G, build_modules
+from swarmloc.agents.mappo.train import MappoConfig, train
+from swarmloc.agents.mappo.collect import Collection
+from swarmloc.agents.mappo.nets import G, build_modules
 
 
 @pytest.fixture(scope="module")

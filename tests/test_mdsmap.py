@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import shortest_path
 
-from swarmloc.agents.init import classical_mds, complete_distances, mdsmap_init, nls_init
+from swarmloc.agents.estimators.init import classical_mds, complete_distances, mdsmap_init, nls_init
 
 VARIANTS = ["algorithm2", "joint"]
 

@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.bench.evaluation import metrics as M
-
+from swarmloc.bench.scoring import metrics as M
 ERRORS = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
 
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from swarmloc.bench import cli
-from swarmloc.bench.cli import extras
+from swarmloc import cli
+from swarmloc.cli import extras
 
 ROOT = Path(__file__).resolve().parents[1]
 ROOMS = ("envs", "agents", "bench", "leaderboard")
@@ -70,12 +70,12 @@ def test_every_code_folder_ships_as_a_package(wheel):
 def test_weights_results_and_static_files_ship(wheel):
     zf, _, files = wheel
     names = set(zf.namelist())
-    data = [f for f in files if f.startswith(("agents/weights/", "leaderboard/results/", "leaderboard/static/"))]
+    data = [f for f in files if f.startswith(("agents/weights/", "bench/results/", "leaderboard/site/static/"))]
     missing = sorted(f for f in data if f"swarmloc/{f}" not in names)
     assert not missing, f"package data missing from the wheel: {missing}"
     results = [n for n in names if "/results/" in n and n.endswith(".json")]
     assert len(results) >= 20
-    assert any(n.startswith("swarmloc/leaderboard/results/standard-v1/") for n in results)
+    assert any(n.startswith("swarmloc/bench/results/standard-v1/") for n in results)
     assert any(n.startswith("swarmloc/agents/weights/") and n.endswith(".pt") for n in names)
     assert not [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".nbi", ".nbc"))]
 
@@ -105,7 +105,7 @@ def test_leaderboard_show_shipped_loads_the_shipped_results(tmp_path):
 
     from rich.console import Console
 
-    from swarmloc.bench.cli import leaderboard_show
+    from swarmloc.cli import leaderboard_show
 
     console = Console(record=True, width=100, file=io.StringIO())
     url = f"sqlite:///{tmp_path / 'board.db'}"
@@ -181,7 +181,7 @@ def _run_without(module: str):
 
 
 def test_cli_names_the_missing_extra(monkeypatch, capsys):
-    from swarmloc.bench.cli import tasks
+    from swarmloc.cli import tasks
 
     monkeypatch.setattr(tasks, "run", _run_without("sqlalchemy"))
     assert cli.main(["tasks"]) == 2

@@ -14,11 +14,11 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs import cekf
-from swarmloc.envs.cekf_reference import ci_peer_update, run_reference
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.worlds import make_world
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.cekf_reference import ci_peer_update, run_reference
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
+from swarmloc.envs.world.worlds import make_world
 
 from envs_helpers import record
 

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmloc.agents.pf import core
-from swarmloc.agents.pf.filters import (
+from swarmloc.agents.estimators.pf import core
+from swarmloc.agents.estimators.pf.filters import (
     ADAPTIVE,
     FIXED_800,
     STANDARD,
@@ -21,12 +21,12 @@ from swarmloc.agents.pf.filters import (
     PFNNOnlineOracle,
     make_pfnn,
 )
-from swarmloc.agents.pf.pfnn import SHIPPED_WEIGHTS, PFNNWeights, load_weights, random_weights, shipped_weights
-from swarmloc.agents.pf.reference import ReferenceParticleFilter, systematic_resample_reference, uniform_np
+from swarmloc.agents.estimators.pf.pfnn import SHIPPED_WEIGHTS, PFNNWeights, load_weights, random_weights, shipped_weights
+from swarmloc.agents.estimators.pf.reference import ReferenceParticleFilter, systematic_resample_reference, uniform_np
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
-from swarmloc.envs.rng import Stream, uniform
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.rng import Stream, uniform
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 PF_DIR = Path(core.__file__).resolve().parent
 
@@ -371,6 +371,5 @@ def test_reproduce_smoke(tmp_path):
 
 
 def test_cli_groups_register_train_and_reproduce_pfnn():
-    from swarmloc.bench import cli
-
+    from swarmloc import cli
     assert cli.main(["train", "pfnn", "--seed-start", "1000000", "--seeds", "1"]) == 2

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from swarmloc.agents.dead_reckoning import DeadReckoning
+from swarmloc.agents.estimators.dead_reckoning import DeadReckoning
 from swarmloc.agents.protocols import (
     Estimator,
     EstimatorOutput,
@@ -19,10 +19,10 @@ from swarmloc.agents.protocols import (
     episode_keys,
 )
 from swarmloc.agents.registry import REGISTRY, LoadedMethod, load_method, method_names
-from swarmloc.agents.trust_estimator import TrustEstimator
+from swarmloc.agents.estimators.trust_estimator import TrustEstimator
 from swarmloc.bench.evaluation.runner import rollout
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 FORBIDDEN = {"truth", "pos", "vel", "label", "labels", "injected", "schedule", "spec", "seeds", "seed"}
 SEEDS = [1_000_000, 1_000_001, 1_000_002]

@@ -15,13 +15,13 @@ import pydantic
 import pytest
 
 from swarmloc.bench.evaluation.runner import evaluate_task
-from swarmloc.envs.channels import GPS, LANDMARK
-from swarmloc.envs.faults import FaultSchedule, build_schedule
-from swarmloc.envs.specs import GpsDriftRandom, HybridNoise, VisionOutageRandom
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.tasks_v1 import (GPS_DRIFT_SHIFTED, GPS_DRIFT_TRAIN, HYBRID_SHIFTED_DOF, HYBRID_TRAIN_RATIO,
+from swarmloc.envs.tasks.channels import GPS, LANDMARK
+from swarmloc.envs.world.faults import FaultSchedule, build_schedule
+from swarmloc.envs.tasks.specs import GpsDriftRandom, HybridNoise, VisionOutageRandom
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.tasks.v1 import (GPS_DRIFT_SHIFTED, GPS_DRIFT_TRAIN, HYBRID_SHIFTED_DOF, HYBRID_TRAIN_RATIO,
                                     VISION_OUTAGE_SHIFTED, VISION_OUTAGE_TRAIN)
-from swarmloc.envs.world import World
+from swarmloc.envs.world.sim import World
 
 SEEDS = list(range(2_000_000, 2_000_064))
 FAMILIES = ("HybridNoise", "GradualFault", "VisionLoss")
@@ -277,7 +277,7 @@ def test_task_spec_checks_the_random_faults_against_the_task():
 
 
 def test_documented_ranges_reach_the_task_pages():
-    from swarmloc.envs.task_docs import _faults
+    from swarmloc.envs.tasks.docs import _faults
 
     text = " ".join(_faults(get_spec("swarmloc/GradualFaultRandom-v1")))
     assert "0.05–0.25 m/s" in text and "[50.0, 150.0] s" in text

@@ -14,7 +14,7 @@ from swarmloc.bench.reproduce.peer_update import (
     render,
     reproduce_peer_update,
 )
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 
 def test_covers_the_v1_tasks_with_peer_channels():

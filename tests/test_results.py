@@ -91,7 +91,7 @@ def test_an_older_file_loads_with_its_retired_normalized_score_ignored(version: 
 
 
 def test_the_shipped_results_files_load_without_the_retired_metric() -> None:
-    from swarmloc.leaderboard.shipped import shipped_results
+    from swarmloc.bench.evaluation.shipped import shipped_results
 
     for path in shipped_results():
         raw = json.loads(path.read_text(encoding="utf-8"))
@@ -205,8 +205,7 @@ def test_results_module_stays_light() -> None:
 
 def test_score_block_summarizes_the_episodes() -> None:
     """The results file's ``score`` block is the score of its own episodes (2^S, coverage, per-task gains)."""
-    from swarmloc.bench.evaluation import score as S
-
+    from swarmloc.bench.scoring import score as S
     def ep(task: str, seed: int, rmse: float | None, uniform: float) -> dict:
         return {"task": task, "seed": seed, "metrics": R.EpisodeMetrics.of(rmse=rmse, uniform_rmse=uniform).model_dump()}
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.agents.dead_reckoning import DeadReckoning
+from swarmloc.agents.estimators.dead_reckoning import DeadReckoning
 from swarmloc.agents.protocols import EstimatorOutput, Measurements
 from swarmloc.agents.registry import LoadedMethod, load_method
 from swarmloc.bench.evaluation.results import METRIC_NAMES, load_results
@@ -19,7 +19,7 @@ from swarmloc.bench.evaluation.runner import (
     traces_path,
 )
 from swarmloc.bench.evaluation.suites import Suite
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 EPISODES = [("swarmloc/NLOS-v0", 1_000_001), ("swarmloc/CascadedFaultRandom-v0", 1_000_002),
             ("NLOS-v0", 1_000_000), ("swarmloc/CascadedFaultRandom-v0", 1_000_000)]
@@ -52,7 +52,7 @@ def test_metric_definitions_per_task():
 
 
 def test_per_episode_healthy_scoring_scores_exactly_the_healthy_uavs():
-    from swarmloc.envs.world import World
+    from swarmloc.envs.world.sim import World
 
     spec = get_spec("swarmloc/CascadedFaultRandom-v0", duration=41.0, scoring={"nodes_from_schedule": "healthy"})
     seeds = [1_000_000, 1_000_001]

@@ -1,4 +1,4 @@
-"""Score v1 (bench/evaluation/score.py): hand-computed cases for every quantity."""
+"""Score v1 (bench/scoring/score.py): hand-computed cases for every quantity."""
 
 from __future__ import annotations
 
@@ -7,9 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.bench.evaluation import score as S
-
-
+from swarmloc.bench.scoring import score as S
 def _ep(task, seed, rmse, uniform, bound=None):
     return {"task": task, "seed": seed, "metrics": {"rmse": rmse, "uniform_rmse": uniform, "bound_rmse": bound}}
 

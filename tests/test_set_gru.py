@@ -12,8 +12,8 @@ import pytest
 import torch
 from trust_helpers import obs_input
 
-from swarmloc.agents.set_gru_policy import SetGruActor, SetGruPolicy, count_flops_per_channel, load_set_gru_actor
-from swarmloc.envs.observation import N_FEATURES, VALID
+from swarmloc.agents.mappo.set_gru_policy import SetGruActor, SetGruPolicy, count_flops_per_channel, load_set_gru_actor
+from swarmloc.envs.world.observation import N_FEATURES, VALID
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -80,8 +80,8 @@ def test_sequence_replays_the_step_by_step_rollout():
 
 def test_policy_episodes_are_independent_and_reset_clears_memory():
     """Batched == single: each episode's trust depends on its own observations only; reset restarts memory."""
-    from swarmloc.envs.channels import build_layout
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.channels import build_layout
+    from swarmloc.envs.tasks.catalogue import get_spec
     layout = build_layout(get_spec("swarmloc/NLOS-v1"))
     n, n_l = layout.kind.shape
     rng = np.random.default_rng(4)
@@ -127,7 +127,7 @@ def test_flops_grow_with_the_widths():
 
 
 def test_config_refuses_what_recurrent_training_cannot_do(tmp_path):
-    from swarmloc.agents.mappo_config import SetGruConfig
+    from swarmloc.agents.mappo.config import SetGruConfig
 
     with pytest.raises(ValueError, match="divisible by minibatches"):
         SetGruConfig(num_envs=6, minibatches=4, run_dir=str(tmp_path))
@@ -140,7 +140,7 @@ def test_config_refuses_what_recurrent_training_cannot_do(tmp_path):
 def test_label_loss_weight_anneals_linearly_to_its_final_value(tmp_path):
     """``label_coef_final``: the weight goes linearly from ``label_coef`` at the first iteration to the final value
     at the end (as the learning rate anneals); without it the weight stays ``label_coef``."""
-    from swarmloc.agents.mappo_config import MappoConfig, SetGruConfig
+    from swarmloc.agents.mappo.config import MappoConfig, SetGruConfig
 
     cfg = SetGruConfig(label_coef=1.0, label_coef_final=0.0, run_dir=str(tmp_path))
     assert [cfg.label_weight(it, 8) for it in (0, 2, 4, 6)] == [1.0, 0.75, 0.5, 0.25]
@@ -177,8 +177,8 @@ def test_train_cli_smoke_replays_the_collected_log_probabilities(tmp_path):
 
 
 def test_training_is_deterministic_given_a_seed(tmp_path):
-    from swarmloc.agents.mappo_config import SetGruConfig
-    from swarmloc.agents.mappo_set_gru import train
+    from swarmloc.agents.mappo.config import SetGruConfig
+    from swarmloc.agents.mappo.set_gru import train
 
     def cfg(i: int, seed: int) -> SetGruConfig:
         return SetGruConfig(tasks=("Scale2-v1",), frames=400, num_envs=2, rollout_steps=100, epochs=1, minibatches=2,
@@ -194,8 +194,8 @@ def test_training_gives_the_same_weights_on_one_or_two_threads(tmp_path):
     """``--threads 2`` (the world's kernels on both cores) changes no number, at the shipped widths (E = H = 64),
     where a threaded BLAS would split the update's matrix products: torch stays on one thread, so this holds
     on any x86-64 CPU (MKL on AVX-512 Xeons reduces in a thread-dependent order)."""
-    from swarmloc.agents.mappo_config import SetGruConfig
-    from swarmloc.agents.mappo_set_gru import train
+    from swarmloc.agents.mappo.config import SetGruConfig
+    from swarmloc.agents.mappo.set_gru import train
 
     def cfg(threads: int) -> SetGruConfig:
         return SetGruConfig(tasks=("ScaleRandom-v1",), frames=800, num_envs=4, rollout_steps=100, epochs=1,
@@ -212,11 +212,11 @@ def test_training_batches_carry_the_pending_fault_labels_of_what_the_policy_saw(
     """The auxiliary loss's labels: on NLOSStep-v1 (anchors 0, 2, 4 biased from 20 s, ramping over 5 s) no anchor
     channel is labelled before the window and, inside it, only those anchors' are. (Labels v1 of Track A also
     mark peer links whose neighbour's broadcast estimate is off: the swarm's first steps, and inside the window.)"""
-    from swarmloc.agents.mappo_collect import Collection
-    from swarmloc.agents.mappo_config import SetGruConfig
-    from swarmloc.agents.mappo_set_gru import PendingLabels, build_policy
-    from swarmloc.envs.channels import ANCHOR, build_layout
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.agents.mappo.collect import Collection
+    from swarmloc.agents.mappo.config import SetGruConfig
+    from swarmloc.agents.mappo.set_gru import PendingLabels, build_policy
+    from swarmloc.envs.tasks.channels import ANCHOR, build_layout
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     cfg = SetGruConfig(tasks=("NLOSStep-v1",), num_envs=2, minibatches=2, frames=400, run_dir="unused")
     envs: list = []

@@ -7,8 +7,9 @@ import pytest
 
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.suites import get_suite
-from swarmloc.leaderboard.shipped import RESULTS_DIRS, WITHOUT_V1_RESULTS, load_shipped, shipped_results
-from swarmloc.leaderboard.store import SHIPPED_REFERENCE_METHODS, LeaderboardStore
+from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, shipped_results
+from swarmloc.leaderboard.store.shipped import WITHOUT_V1_RESULTS, load_shipped
+from swarmloc.leaderboard.store.database import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 
 FILES = shipped_results()
 
@@ -25,7 +26,7 @@ def test_shipped_file_matches_the_current_suite(path):
     assert results.suite.name == suite_name
     suite = get_suite(suite_name)
     assert results.suite.sha256 == suite.sha256, \
-        f"stale: regenerate with python -m swarmloc.leaderboard.shipped --suite {suite_name} --regenerate"
+        f"stale: regenerate with swarmloc reproduce shipped --suite {suite_name}"
     assert {(e.task, e.seed) for e in results.episodes} == set(suite.episodes)
 
 
@@ -58,7 +59,7 @@ def test_a_shipped_method_whose_results_changed_replaces_its_stale_entry(tmp_pat
 
     from swarmloc.bench.evaluation.results import make_results, write_results
     from swarmloc.leaderboard.errors import DuplicateSubmission, InvalidSubmission
-    from swarmloc.leaderboard.submit import submit
+    from swarmloc.leaderboard.submit.pipeline import submit
 
     shipped = tmp_path / "shipped"
     shipped.mkdir()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
-from swarmloc.envs.specs import ImuCascade, NlosStep, TaskSpec
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.specs import ImuCascade, NlosStep, TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 
 def base(**changes) -> dict:
@@ -106,7 +106,7 @@ def test_non_finite_numbers_are_refused_naming_the_field(task, changes, field):
 
 def test_every_registered_spec_is_finite():
     """The refusal changes no shipped task: every registered spec still validates."""
-    from swarmloc.envs.tasks import CATALOGUE
+    from swarmloc.envs.tasks.catalogue import CATALOGUE
 
     for task in CATALOGUE:
         spec = get_spec(task)

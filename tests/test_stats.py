@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.bench.evaluation import stats
+from swarmloc.bench.scoring import stats
 from swarmloc.bench.evaluation.results import METRIC_NAMES, EpisodeMetrics
 
 

@@ -12,7 +12,7 @@ from swarmloc.bench.evaluation.suites import (
     restrict_tasks,
     suite_names,
 )
-from swarmloc.envs.tasks import CATALOGUE
+from swarmloc.envs.tasks.catalogue import CATALOGUE
 
 #: the published hash of standard-v0; changing the suite needs a new version
 STANDARD_V0_SHA256 = "457474c96a5eb6f38151eb0f20d4af8348304e6e289ea000c4873a3f544cfb7f"
@@ -70,7 +70,7 @@ def test_restrict_tasks():
 
 
 def test_suite_satisfies_leaderboard_lookup():
-    from swarmloc.leaderboard.schema import default_suite_lookup
+    from swarmloc.leaderboard.store.schema import default_suite_lookup
 
     suite = default_suite_lookup("standard-v0")
     assert (suite.name, suite.version, suite.sha256) == ("standard-v0", "0", STANDARD_V0_SHA256)
@@ -78,9 +78,9 @@ def test_suite_satisfies_leaderboard_lookup():
 
 
 def test_standard_v1_holds_every_simulated_v1_task_and_its_hash_covers_the_specs():
-    from swarmloc.bench.evaluation.families import task_split
+    from swarmloc.bench.scoring.families import task_split
     from swarmloc.bench.evaluation.suites import STANDARD_V1_TASKS, Suite, simulated_tasks
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     suite = get_suite("standard-v1")
     assert (suite.name, suite.version) == ("standard-v1", "1")

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmloc.bench.evaluation.families import task_split
-from swarmloc.envs.faults import build_schedule
-from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.tasks_v1 import CATALOGUE_V1, HISTORY_V1, NLOS_SHIFTED_RANGES, NLOS_TRAIN_RANGES
-from swarmloc.envs.world import World
+from swarmloc.bench.scoring.families import task_split
+from swarmloc.envs.world.faults import build_schedule
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
+from swarmloc.envs.tasks.v1 import CATALOGUE_V1, HISTORY_V1, NLOS_SHIFTED_RANGES, NLOS_TRAIN_RANGES
+from swarmloc.envs.world.sim import World
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_world import rollout  # noqa: E402

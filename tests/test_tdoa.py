@@ -10,17 +10,17 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs import cekf
-from swarmloc.envs.bound import pcrlb, record_inputs
-from swarmloc.envs.bound_reference import pcrlb_reference
-from swarmloc.envs.cekf_reference import measurement_rows, predict_reference, run_reference, update_reference
-from swarmloc.envs.channels import ANCHOR, KIND_DIM, TDOA, build_layout, tdoa_code, tdoa_pair
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
-from swarmloc.envs.observation import KIND0, kind_one_hot
-from swarmloc.envs.specs import TaskSpec, all_pairs, ring_pairs
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.bound import pcrlb, record_inputs
+from swarmloc.envs.filter.bound_reference import pcrlb_reference
+from swarmloc.envs.filter.cekf_reference import measurement_rows, predict_reference, run_reference, update_reference
+from swarmloc.envs.tasks.channels import ANCHOR, KIND_DIM, TDOA, build_layout, tdoa_code, tdoa_pair
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.world.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
+from swarmloc.envs.world.observation import KIND0, kind_one_hot
+from swarmloc.envs.tasks.specs import TaskSpec, all_pairs, ring_pairs
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/TDOA-v1"
 
@@ -80,7 +80,7 @@ def test_observation_puts_tdoa_in_the_anchor_column():
     assert one_hot.shape == (4, 8, 5) and (one_hot[..., 0] == 1).all() and one_hot.sum() == 32
     core = LinkTrustCore(get_spec(TASK, duration=1.0), 1)
     core.reset([0])
-    from swarmloc.envs.trust_env import TrustEnvBatch
+    from swarmloc.envs.adapters.trust_env import TrustEnvBatch
 
     env = TrustEnvBatch(get_spec(TASK, duration=1.0), 1)
     env.reset([0])

@@ -10,8 +10,8 @@ import swarmloc.envs  # noqa: F401  (registers the tasks)
 from swarmloc.agents.protocols import TrustInput, episode_keys
 from swarmloc.agents.registry import load_method
 from swarmloc.bench.evaluation.runner import run_episodes
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.trust_env import TrustEnvBatch
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.adapters.trust_env import TrustEnvBatch
 
 
 def _gym_team_return(method: str, task: str, seed: int) -> float:

@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 import swarmloc.envs  # noqa: F401  (registers the tasks)
-from swarmloc.envs.core import LinkTrustCore
+from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.recorded import util_flight
 from swarmloc.envs.recorded.replay import RecordedWorld
 from swarmloc.envs.recorded.util_import import find_util_data
-from swarmloc.envs.specs import RecordedFlight, TaskSpec
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
-from swarmloc.envs.worlds import data_missing, is_recorded, make_world
+from swarmloc.envs.tasks.specs import RecordedFlight, TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
+from swarmloc.envs.world.worlds import data_missing, is_recorded, make_world
 
 TASK = "swarmloc/UTILFlight-v0"
 SPEC = get_spec(TASK)
@@ -258,7 +258,7 @@ def test_accuracy_uniform_chi2_oracle_on_twr_obs_log1():
 
 
 def test_import_command_is_registered(tmp_path):
-    cli = pytest.importorskip("swarmloc.bench.cli")
+    cli = pytest.importorskip("swarmloc.cli")
     status = cli.main(["data", "import-util", str(tmp_path / "missing.bin"), "--anchors",
                        str(tmp_path / "survey.txt"), "--out", str(tmp_path / "out")])
     assert status == 2 and not (tmp_path / "out").exists()

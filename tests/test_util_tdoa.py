@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmloc.envs.core import LinkTrustCore
+from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.recorded import tdoa_flight as T
 from swarmloc.envs.recorded.cfusdlog import read_usd_log
 from swarmloc.envs.recorded.replay import RecordedWorld
 from swarmloc.envs.recorded.tdoa_import import TdoaImportError, find_tdoa_data, import_util_tdoa, tdoa_tables
-from swarmloc.envs.specs import ring_pairs
-from swarmloc.envs.tasks import UTIL_TDOA_FLIGHTS, get_spec
-from swarmloc.envs.worlds import data_missing, make_world
+from swarmloc.envs.tasks.specs import ring_pairs
+from swarmloc.envs.tasks.catalogue import UTIL_TDOA_FLIGHTS, get_spec
+from swarmloc.envs.world.worlds import data_missing, make_world
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 TASKS = [f"swarmloc/{name}-v1" for name in UTIL_TDOA_FLIGHTS]

@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.rng import normal_array, uniform_array
-from swarmloc.envs.tasks import CATALOGUE, get_spec
-from swarmloc.envs.world import World
-from swarmloc.envs.worlds import data_missing, make_world
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.rng import normal_array, uniform_array
+from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
+from swarmloc.envs.world.sim import World
+from swarmloc.envs.world.worlds import data_missing, make_world
 
 
 def rollout(task_id: str, seeds: list[int], n_steps: int, **overrides) -> dict[str, np.ndarray]:
@@ -152,7 +152,7 @@ def test_every_task_runs_and_labels_only_valid_channels(task_id):
 
 
 def test_spec_json_roundtrip_all_tasks():
-    from swarmloc.envs.specs import TaskSpec
+    from swarmloc.envs.tasks.specs import TaskSpec
 
     for task_id in CATALOGUE:
         spec = get_spec(task_id)

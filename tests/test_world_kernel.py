@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from swarmloc.bench.speed.world import UnfusedCore
-from swarmloc.envs.core import SERIAL_BELOW, LinkTrustCore
-from swarmloc.envs.core_kernel import core_step, core_step_threaded, step_kernel
-from swarmloc.envs.rng import normal, student_t, uniform
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.worlds import data_missing, make_world
+from swarmloc.envs.world.core import SERIAL_BELOW, LinkTrustCore
+from swarmloc.envs.world.core_kernel import core_step, core_step_threaded, step_kernel
+from swarmloc.envs.tasks.rng import normal, student_t, uniform
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.worlds import data_missing, make_world
 
 #: between them every channel kind and fault the kernel implements: ranges to anchors and
 #: peers, Gauss–Markov and windowed NLOS, IMU cascades with blind nodes, landmarks with a

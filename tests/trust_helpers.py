@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmloc.agents.protocols import TrustInput
-from swarmloc.envs.channels import ChannelLayout
+from swarmloc.envs.tasks.channels import ChannelLayout
 
 
 def trust_layout(kinds: list[int]) -> ChannelLayout:
@@ -26,7 +26,7 @@ def trust_input(nis: np.ndarray, valid: np.ndarray | None = None, step: int = 1)
 
 def obs_input(obs: np.ndarray) -> TrustInput:
     """A ``TrustInput`` carrying the observation ``obs`` (B, N, L, F) (raw fields zero, trust 1, valid from obs)."""
-    from swarmloc.envs.observation import VALID
+    from swarmloc.envs.world.observation import VALID
 
     b, n, n_l, _ = obs.shape
     z = np.zeros((b, n, n_l))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.tasks.specs import TaskSpec
 
 
 def yaw_translation_fit(estimate: np.ndarray, truth: np.ndarray, weight: np.ndarray | None = None

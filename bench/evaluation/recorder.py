@@ -2,7 +2,7 @@
 
 ``EpisodeRecorder.record`` is called once per filter update with the batched estimate,
 truth, channel validity, fault labels, applied trust and FLOPs; ``episode_metrics(b)``
-then evaluates every metric of ``swarmloc.bench.evaluation.metrics`` for episode b. Only
+then evaluates every metric of ``swarmloc.bench.scoring.metrics`` for episode b. Only
 ``(T, B, N)`` errors and streaming channel sums are kept, never ``(T, B, N, L)`` arrays.
 """
 
@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.scoring import metrics as M
 from swarmloc.bench.evaluation import selection
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.bench.evaluation.traces import Trace
-from swarmloc.envs.reward import RewardTerms, standard_reward, team_reward
-from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.world.reward import RewardTerms, standard_reward, team_reward
+from swarmloc.envs.tasks.specs import TaskSpec
 
 
 class EpisodeRecorder:

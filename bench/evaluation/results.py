@@ -209,7 +209,7 @@ class Aggregate(BaseModel):
 
 
 class TaskScoreBlock(BaseModel):
-    """The score of one covered task (``swarmloc.bench.evaluation.score``).
+    """The score of one covered task (``swarmloc.bench.scoring.score``).
 
     Attributes:
         gain: ``G_t``, the mean over seeds of log2(RMSE_uniform / RMSE).
@@ -251,7 +251,7 @@ class ScoreBlock(BaseModel):
 
 def score_block(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreBlock | None:
     """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file)."""
-    from swarmloc.bench.evaluation.score import suite_score  # local: score imports stats, stats this module
+    from swarmloc.bench.scoring.score import suite_score  # local: score imports stats, stats this module
 
     s = suite_score([e.model_dump() for e in episodes], list(tasks))
     if s is None:
@@ -364,10 +364,10 @@ def make_results(
         provenance: Defaults to :func:`collect_provenance`.
 
     Returns:
-        The validated results, aggregates from :func:`swarmloc.bench.evaluation.stats.aggregate`
+        The validated results, aggregates from :func:`swarmloc.bench.scoring.stats.aggregate`
         and the ``score`` block from :func:`score_block`.
     """
-    from swarmloc.bench.evaluation.stats import aggregate  # local: stats imports this module
+    from swarmloc.bench.scoring.stats import aggregate  # local: stats imports this module
 
     parsed = [e if isinstance(e, Episode) else Episode.model_validate(e) for e in episodes]
     aggregates = aggregate(parsed)

@@ -19,7 +19,7 @@ produced it.
 Privileged methods get the pending measurements' fault labels through
 ``observe_privileged`` before every ``act``/``step``; no other method ever does. A
 ``PrivilegedInfo`` carries the injected-fault labels (what the detection metrics count)
-and the error labels (``swarmloc.envs.labels``): on Track A the core's, peer links included
+and the error labels (``swarmloc.envs.world.labels``): on Track A the core's, peer links included
 through the neighbour's broadcast estimate, with the systematic error in σ_eff behind them;
 on Track B the world's, the measurement's own error only (an estimator's estimates are its
 own).
@@ -56,7 +56,7 @@ from swarmloc.bench.evaluation.backends import (
     pin_torch_threads,
     run_jobs,
 )
-from swarmloc.bench.evaluation.bounds import episode_bounds
+from swarmloc.bench.scoring.bounds import episode_bounds
 from swarmloc.bench.evaluation.outcomes import (
     EvaluationFailed,
     Gathered,
@@ -71,18 +71,18 @@ from swarmloc.bench.evaluation.recorder import EpisodeRecorder
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
 from swarmloc.bench.evaluation.suites import Suite, require_data
 from swarmloc.bench.evaluation.traces import Trace, read_traces, traces_path, write_traces
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.trust_env import TrustEnvBatch
-from swarmloc.envs.world import World, validate_seeds
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.adapters.trust_env import TrustEnvBatch
+from swarmloc.envs.world.sim import World, validate_seeds
 
 _Recorder = EpisodeRecorder  # former private name, kept for existing imports
 
 
 def make_world(spec: TaskSpec, batch_size: int) -> Any:
-    """The task's world: ``swarmloc.envs.worlds.make_world`` (simulated or recorded) where available."""
+    """The task's world: ``swarmloc.envs.world.worlds.make_world`` (simulated or recorded) where available."""
     try:
-        from swarmloc.envs.worlds import make_world as _make_world
+        from swarmloc.envs.world.worlds import make_world as _make_world
     except ImportError:  # an envs without recorded worlds: every world is simulated
         return World(spec, batch_size)
     return _make_world(spec, batch_size)
@@ -302,7 +302,7 @@ def evaluate_task(methods: Sequence[str], task: str | TaskSpec, seeds: Sequence[
 
 
 def fill_reference(episodes: Any, uniform: Sequence[float]) -> None:
-    """Fill in ``uniform_rmse`` (the reference of the score, ``swarmloc.bench.evaluation.score``) of metrics dicts.
+    """Fill in ``uniform_rmse`` (the reference of the score, ``swarmloc.bench.scoring.score``) of metrics dicts.
 
     Args:
         episodes: per method, one metrics dict per seed (an iterable of lists), changed in place.

@@ -10,7 +10,7 @@ here, so ``rmse`` and ``bound_rmse`` are always over the same UAVs and steps:
 * healthy UAVs and steps of ``healthy_rmse``;
 * each UAV's IMU-fault end, from which ``recovery_s`` is measured.
 
-``schedule`` is the world's ``swarmloc.envs.faults.FaultSchedule`` of the batch (None for a
+``schedule`` is the world's ``swarmloc.envs.world.faults.FaultSchedule`` of the batch (None for a
 world without one, e.g. a recorded flight) and b the episode's index in it.
 """
 
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.evaluation import metrics as M
-from swarmloc.envs.specs import TaskSpec
+from swarmloc.bench.scoring import metrics as M
+from swarmloc.envs.tasks.specs import TaskSpec
 
 
 def step_times(spec: TaskSpec) -> np.ndarray:

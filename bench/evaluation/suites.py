@@ -1,6 +1,6 @@
 """Evaluation suites: frozen lists of (task ID, seed) episodes.
 
-Seed ranges live in ``swarmloc.envs.seeds`` (training ``[0, 1_000_000)``, test from
+Seed ranges live in ``swarmloc.envs.tasks.seeds`` (training ``[0, 1_000_000)``, test from
 1_000_000, dev from 2_000_000; methods never see seeds): ``standard-v0`` and ``quick`` use
 test seeds 1_000_000 + i, ``dev`` uses 2_000_000 + i.
 
@@ -43,15 +43,15 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 from swarmloc.bench.evaluation.results import suite_sha256
-from swarmloc.envs.seeds import (  # noqa: F401  (re-exported: the suites' seed ranges)
+from swarmloc.envs.tasks.seeds import (  # noqa: F401  (re-exported: the suites' seed ranges)
     DEV_SEED_START,
     RESERVED_SEED_START,
     TEST_SEED_START,
     TRAINING_SEED_LIMIT,
     check_training_seeds,
 )
-from swarmloc.envs.tasks import CATALOGUE, canonical_task_id, get_spec
-from swarmloc.envs.tasks_v1 import CATALOGUE_V1
+from swarmloc.envs.tasks.catalogue import CATALOGUE, canonical_task_id, get_spec
+from swarmloc.envs.tasks.v1 import CATALOGUE_V1
 
 
 #: the tasks of ``standard-v0`` (frozen with the suite)
@@ -137,7 +137,7 @@ def _dev() -> Suite:
 
 
 #: the tasks of ``standard-v1``: every simulated v1 task, in-distribution and shifted splits
-#: (``envs/tasks_v1.py``), plus the simulated TDOA room
+#: (``envs/tasks/v1.py``), plus the simulated TDOA room
 STANDARD_V1_TASKS: tuple[str, ...] = ("swarmloc/TDOA-v1",) + tuple(CATALOGUE_V1)
 
 
@@ -207,7 +207,7 @@ def missing_data(suite: Suite) -> dict[str, str]:
     Returns:
         task ID → message naming where the data comes from and the command that imports it.
     """
-    from swarmloc.envs.worlds import data_missing
+    from swarmloc.envs.world.worlds import data_missing
 
     found = {}
     for task in suite.tasks:

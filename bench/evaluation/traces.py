@@ -15,9 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.bench.common.files import atomic_path
-from swarmloc.bench.evaluation import metrics as M
-
-
+from swarmloc.bench.scoring import metrics as M
 @dataclass
 class Trace:
     """Per-step record of one episode, for plots (the first seed of each task).

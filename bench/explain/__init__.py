@@ -10,10 +10,10 @@
 | ``report`` | the Table 5-style summary (Markdown + JSON) |
 | ``figure`` | the Figure 6 chain: perception → decision → result, and the attributions |
 
-``swarmloc explain`` (``bench/cli/explain.py``) runs them for one episode.
+``swarmloc explain`` (``cli/explain.py``) runs them for one episode.
 """
 
-from .attributions import EXPLAINERS, Attributions, Explanation, attribute, explain
-from .episode import Episode, replay
+from swarmloc.bench.explain.attributions import EXPLAINERS, Attributions, Explanation, attribute, explain
+from swarmloc.bench.explain.episode import Episode, replay
 
 __all__ = ["EXPLAINERS", "Attributions", "Episode", "Explanation", "attribute", "explain", "replay"]

@@ -34,11 +34,11 @@ from typing import Any
 import numpy as np
 
 from swarmloc.agents.registry import LoadedMethod
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
 
-from .episode import Episode, as_loaded, replay
-from .features import baseline_features, check_baseline, group_attributions
+from swarmloc.bench.explain.episode import Episode, as_loaded, replay
+from swarmloc.bench.explain.features import baseline_features, check_baseline, group_attributions
 
 EXPLAINERS = ("auto", "integrated-gradients", "shapley-sampling")
 #: a differentiable form may differ from the method's own act() by rounding (float32 vs float64), no more
@@ -151,7 +151,7 @@ def attribute(method: str | LoadedMethod, episode: Episode, *, explainer: str = 
         ValueError: unknown explainer or baseline; ``integrated-gradients`` asked for a
             method without a differentiable form; a form that does not reproduce the method.
     """
-    from .gradients import differentiable
+    from swarmloc.bench.explain.gradients import differentiable
 
     if explainer not in EXPLAINERS:
         raise ValueError(f"unknown explainer {explainer!r}; choose one of {', '.join(EXPLAINERS)}")
@@ -171,8 +171,8 @@ def attribute(method: str | LoadedMethod, episode: Episode, *, explainer: str = 
 def _attribute(loaded: LoadedMethod, episode: Episode, form: Any, base: np.ndarray, explained: np.ndarray,
                baseline: str, n_samples: int, seed: int, started: float) -> Attributions:
     """:func:`attribute` once its arguments are checked."""
-    from .gradients import integrated_gradients
-    from .shapley import fresh_copy, shapley_sampling
+    from swarmloc.bench.explain.gradients import integrated_gradients
+    from swarmloc.bench.explain.shapley import fresh_copy, shapley_sampling
 
     shape = episode.trust.shape
     if form is not None:
@@ -241,7 +241,7 @@ def explain(method: str | LoadedMethod, task: str | TaskSpec, seeds: Sequence[in
     """
     spec = task if isinstance(task, TaskSpec) else get_spec(task, **overrides)
     loaded = as_loaded(method, spec.version)
-    from .shapley import fresh_copy
+    from swarmloc.bench.explain.shapley import fresh_copy
 
     pristine = LoadedMethod(loaded.name, loaded.entry_point, loaded.track, loaded.privileged, loaded.deterministic,
                             fresh_copy(loaded.method))

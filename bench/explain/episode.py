@@ -1,6 +1,6 @@
 """One recorded Track A episode: what the method saw and did at every step, and how it went.
 
-``replay(method, spec, seeds)`` steps ``swarmloc.envs.trust_env.TrustEnvBatch`` (the same
+``replay(method, spec, seeds)`` steps ``swarmloc.envs.adapters.trust_env.TrustEnvBatch`` (the same
 batched environment every adapter wraps) with a Track A method and keeps, per step, the
 ``TrustInput`` the method was given, the trust it returned, the fault labels of the
 measurements and the position errors of the update. An explainer re-reads the inputs
@@ -21,11 +21,11 @@ import numpy as np
 from swarmloc.agents.protocols import TrustInput, episode_keys
 from swarmloc.agents.registry import LoadedMethod, load_method
 from swarmloc.bench.evaluation.selection import scored_node_masks
-from swarmloc.envs.channels import ChannelLayout
-from swarmloc.envs.observation import N_FEATURES
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.trust_env import TrustEnvBatch
-from swarmloc.envs.world import validate_seeds
+from swarmloc.envs.tasks.channels import ChannelLayout
+from swarmloc.envs.world.observation import N_FEATURES
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.adapters.trust_env import TrustEnvBatch
+from swarmloc.envs.world.sim import validate_seeds
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """What an attribution is attributed to: the observation features, their groups, the baselines.
 
 Every Track A method sees, per channel, the F = 11 features of
-``swarmloc.envs.observation`` (innovation, predicted distance, previous trust, IMU jerk,
+``swarmloc.envs.world.observation`` (innovation, predicted distance, previous trust, IMU jerk,
 NIS, the five-column one-hot of the channel kind, valid) next to the raw fields they are
 built from. An attribution splits the channel's trust α(x) − α(x̄) over the features,
 where x̄ is a **baseline**: the same channel with some features switched to reference
@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.envs.channels import N_KINDS
-from swarmloc.envs.observation import (
+from swarmloc.envs.tasks.channels import N_KINDS
+from swarmloc.envs.world.observation import (
     DISTANCE,
     FEATURE_NAMES,
     INNOVATION,

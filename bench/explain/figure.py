@@ -16,11 +16,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from swarmloc.bench.common.files import atomic_path
-from swarmloc.envs.channels import KIND_NAMES
+from swarmloc.envs.tasks.channels import KIND_NAMES
 
-from .attributions import Explanation
-from .features import GROUP_NAMES
-from .report import fault_window
+from swarmloc.bench.explain.attributions import Explanation
+from swarmloc.bench.explain.features import GROUP_NAMES
+from swarmloc.bench.explain.report import fault_window
 
 
 def pick_channels(ex: Explanation, uav: int | None = None) -> tuple[int, int, int]:

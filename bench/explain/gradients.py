@@ -33,13 +33,13 @@ import numpy as np
 import torch
 from captum.attr import IntegratedGradients
 
-from swarmloc.agents.mappo_policy import LOGIT_LIMIT, MappoPolicy, channel_context
+from swarmloc.agents.mappo.policy import LOGIT_LIMIT, MappoPolicy, channel_context
 from swarmloc.agents.protocols import TrustInput
-from swarmloc.agents.smoothing import MarkovSmoothing
-from swarmloc.envs.channels import N_KINDS
-from swarmloc.envs.observation import INNOVATION, KIND0, SCALE_INNOVATION, VALID
+from swarmloc.agents.trust.smoothing import MarkovSmoothing
+from swarmloc.envs.tasks.channels import N_KINDS
+from swarmloc.envs.world.observation import INNOVATION, KIND0, SCALE_INNOVATION, VALID
 
-from .episode import Episode
+from swarmloc.bench.explain.episode import Episode
 
 Tensor = torch.Tensor
 #: the forms run in float32, as the actor was trained (float64 halves the speed for no gain at a 1e-5 gap)

@@ -16,12 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.common.reports import markdown_table, write_report
-from swarmloc.bench.evaluation import metrics as M
-
-from .attributions import Explanation
-from .episode import Episode
-from .features import GROUP_NAMES
+from swarmloc.bench.reports.markdown import markdown_table, write_report
+from swarmloc.bench.scoring import metrics as M
+from swarmloc.bench.explain.attributions import Explanation
+from swarmloc.bench.explain.episode import Episode
+from swarmloc.bench.explain.features import GROUP_NAMES
 
 #: madrl Table 5 (Experiment 4, 20–30 s): fault RMSE of the standard EKF and MADRL-CEKF [m], mean α
 PAPER_TABLE5 = {"ekf_fault_rmse": 3.0906, "madrl_fault_rmse": 0.8675, "alpha_normal": 0.6456,

@@ -35,10 +35,10 @@ import torch
 from captum.attr import ShapleyValueSampling
 
 from swarmloc.agents.protocols import TrustInput
-from swarmloc.envs.observation import DISTANCE, INNOVATION, JERK, NIS, PREV_TRUST, VALID
+from swarmloc.envs.world.observation import DISTANCE, INNOVATION, JERK, NIS, PREV_TRUST, VALID
 
-from .episode import Episode
-from .features import FEATURE_GROUP, FEATURE_GROUPS, N_GROUPS, raw_value
+from swarmloc.bench.explain.episode import Episode
+from swarmloc.bench.explain.features import FEATURE_GROUP, FEATURE_GROUPS, N_GROUPS, raw_value
 
 #: TrustInput field fed by each feature (jerk is per UAV: a probe sets its UAV's jerk)
 _RAW_FIELD = {INNOVATION: "resid", DISTANCE: "pred", PREV_TRUST: "applied", NIS: "nis", VALID: "valid"}

@@ -14,7 +14,7 @@ information bound ``bound_rmse`` per episode), and the report gives per task
   split is measurably harder for uniform and the best classical method (the per-seed log
   ratio shifted / in-distribution, paired on the shared test seeds, with its CI above 0);
 * the gap closed (``score.py``) of every method evaluated here and of every registered method
-  whose shipped results (the suite's folder, ``leaderboard/results/standard-v1``) hold these
+  whose shipped results (the suite's folder, ``bench/results/standard-v1``) hold these
   tasks and seeds.
 
 The phenomena that need more than the runner's metrics get it from the runner too:
@@ -37,16 +37,16 @@ import numpy as np
 from swarmloc.agents.registry import REGISTRY
 from swarmloc.bench.common.files import write_text_atomic
 from swarmloc.bench.common.provenance import collect_provenance
-from swarmloc.bench.evaluation import metrics as M
-from swarmloc.bench.evaluation.families import FAMILY_OF_BASE, group_by_family, task_base, task_label, task_split
+from swarmloc.bench.scoring import metrics as M
+from swarmloc.bench.scoring.families import FAMILY_OF_BASE, group_by_family, task_base, task_label, task_split
 from swarmloc.bench.evaluation.outcomes import TaskOutcome
-from swarmloc.bench.evaluation.score import suite_score
+from swarmloc.bench.scoring.score import suite_score
 from swarmloc.bench.evaluation.suites import Suite
 from swarmloc.bench.evaluation.traces import Trace
 from swarmloc.bench.reproduce import calibration_criteria as C
 from swarmloc.bench.reproduce.calibration_phenomena import PHENOMENA, RANDOMIZED_TOO, Evidence, scale_phenomenon
-from swarmloc.envs.specs import Faults, TaskSpec
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.specs import Faults, TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 #: the classical reference methods, run on every task
 CLASSICAL = ("uniform", "oracle", "chi2-gate", "chi2-soft", "huber", "fixed", "federated-coef", "cusum", "raim",
@@ -123,7 +123,7 @@ def uniform_traces(spec: TaskSpec, seeds: Sequence[int]) -> tuple[list[Trace], l
     """
     from swarmloc.agents.registry import load_method
     from swarmloc.bench.evaluation.runner import rollout
-    from swarmloc.envs.worlds import make_world
+    from swarmloc.envs.world.worlds import make_world
 
     traces, healthy = [], []
     for seed in seeds:
@@ -147,7 +147,7 @@ def window_bounds(spec: TaskSpec, seeds: Sequence[int]) -> np.ndarray | None:
 
     None where the task has no fault window, the bound is undefined, or its recursion fails.
     """
-    from swarmloc.envs.bound import bound_rmse, pcrlb, record_inputs, unsupported_reason
+    from swarmloc.envs.filter.bound import bound_rmse, pcrlb, record_inputs, unsupported_reason
 
     if spec.scoring.fault_window is None or unsupported_reason(spec) is not None:
         return None
@@ -352,11 +352,10 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         workers: worker processes of the runner.
         overrides: task-spec overrides (shortened episodes in tests: not the suite's numbers, and the
             shipped results are then not compared).
-        results_dir: the shipped results (default: the standard-v1 ones, ``leaderboard/results/standard-v1``).
+        results_dir: the shipped results (default: the standard-v1 ones, ``bench/results/standard-v1``).
         progress: show the runner's progress bar.
     """
-    from swarmloc.leaderboard.ranking import DEFAULT_SUITE
-    from swarmloc.leaderboard.shipped import RESULTS_DIRS
+    from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE, RESULTS_DIRS
 
     short = [t for t in tasks if len(seeds[t]) < 2]
     if short:
@@ -448,7 +447,7 @@ def reproduce_calibration(suite: str = "standard-v1", tasks: Sequence[str] | str
     if seeds is not None and not 2 <= seeds <= available:
         raise ValueError(f"seeds must be in [2, {available}] (the suite's seeds per task), got {seeds}")
     by_task = {t: chosen.seeds(t)[:seeds] for t in chosen.tasks}
-    from swarmloc.leaderboard.shipped import RESULTS_DIRS
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
     raw = calibrate(chosen.tasks, by_task, workers=workers, overrides=overrides,
                     results_dir=results_dir if results_dir is not None else RESULTS_DIRS.get(suite), progress=progress)

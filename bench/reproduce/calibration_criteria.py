@@ -8,7 +8,7 @@ Every v1 task must pass five criteria (``swarmloc reproduce calibration`` report
    non-privileged method within CI (both on paired per-seed differences, 95 % bootstrap);
 2. **the fault matters** (fault tasks) — uniform ≥ 2× the bound (task means);
 3. **headroom** — single-step gating (``chi2-soft``, ``chi2-gate``) closes ≤ 70 % of the
-   achievable gap (the score, ``swarmloc.bench.evaluation.score``), on at least half of the
+   achievable gap (the score, ``swarmloc.bench.scoring.score``), on at least half of the
    fault tasks;
 4. **the paper's phenomenon** — one row per family (``calibration_phenomena``);
 5. **nothing degenerate** — ``random`` trust ≥ 10 % worse (RMSE) than the best method.
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.evaluation.score import suite_score
-from swarmloc.bench.evaluation.stats import bootstrap_ci
+from swarmloc.bench.scoring.score import suite_score
+from swarmloc.bench.scoring.stats import bootstrap_ci
 from swarmloc.bench.reproduce.common import paired
 
 #: criterion 2: uniform at least this many times the bound on a fault task

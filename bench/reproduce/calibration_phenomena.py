@@ -2,7 +2,7 @@
 
 One function per family returns ``{"measured": str, "pass": bool | None}`` from a task's
 :class:`Evidence` (``pass`` None: reported, not judged). ``PHENOMENA`` maps a task's base
-name (``swarmloc.bench.evaluation.families.task_base``: ``NLOSStep`` is its own row) to its
+name (``swarmloc.bench.scoring.families.task_base``: ``NLOSStep`` is its own row) to its
 target and function; Scale is judged across the family's tasks (:func:`scale_phenomenon`).
 A task whose base has no row reports "—".
 
@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.scoring import metrics as M
 from swarmloc.bench.evaluation.traces import Trace
 from swarmloc.bench.reproduce.calibration_criteria import best_of
 from swarmloc.bench.reproduce.common import paired
-from swarmloc.envs.specs import TaskSpec
+from swarmloc.envs.tasks.specs import TaskSpec
 
 IDEAL_MAX_RATIO = 1.3
 NLOS_STEP_FAULT_RMSE = (2.0, 5.0)

@@ -9,8 +9,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from swarmloc.bench.common.reports import markdown_table
-from swarmloc.bench.evaluation.families import short_task, task_label
+from swarmloc.bench.reports.markdown import markdown_table
+from swarmloc.bench.scoring.families import short_task, task_label
 from swarmloc.bench.reproduce import calibration_criteria as C
 
 #: the suite's seeds per task; fewer runs give wider CIs
@@ -190,7 +190,7 @@ def _gap_closed(raw: Mapping[str, Any]) -> list[str]:
     rows = [[m + (" (privileged)" if e["privileged"] else ""), e["source"], _num(e["suite"], 2),
              f"{e['with_gap']}/{e['covered']}"] + [_num(e["families"][f], 2) for f in families]
             for m, e in table.items()]
-    where = raw.get("shipped_dir", "leaderboard/results")
+    where = raw.get("shipped_dir", "bench/results")
     note = (f"Shipped results (`{where}`) cover these tasks and seeds for: "
             f"{', '.join(raw['shipped_methods'])}." if raw["shipped_methods"] else
             f"No shipped results (`{where}`) cover these tasks and seeds"

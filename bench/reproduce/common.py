@@ -18,14 +18,14 @@ import numpy as np
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.agents.registry import LoadedMethod
 from swarmloc.bench.common.provenance import collect_provenance
-from swarmloc.bench.common.reports import report_path, write_report
+from swarmloc.bench.reports.markdown import report_path, write_report
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.bench.evaluation.runner import rollout, single_threaded_kernels
-from swarmloc.bench.evaluation.stats import bootstrap_ci
+from swarmloc.bench.scoring.stats import bootstrap_ci
 from swarmloc.bench.evaluation.suites import TEST_SEED_START
-from swarmloc.envs.channels import PEER
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.channels import PEER
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.world.sim import World
 
 Factory = Callable[[], Any]
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.ci_ekf import ci_ekf, ci_ekf_no_aa
+from swarmloc.agents.estimators.ci_ekf import ci_ekf, ci_ekf_no_aa
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.bench.evaluation.runner import single_threaded_kernels
 from swarmloc.bench.reproduce.common import (
@@ -25,8 +25,8 @@ from swarmloc.bench.reproduce.common import (
     seeds_from,
     write_paper_report,
 )
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 #: dtvirm Table 5 (UWB abnormality): per UAV 1–6 and average RMSE [m]
 PAPER_DTVIRM_TABLE5 = {"COO_VIR": (8.23, 11.12, 10.89, 12.01, 12.34, 13.76, 11.39),
@@ -39,7 +39,7 @@ ABNORMAL_RANGE_M = 1.0  # dtvirm §4.4: a range more than 1 m off the truth is a
 
 def init_study(seeds: list[int], windows: tuple[float, ...] = (1.0, 2.0, 3.0)) -> dict[str, dict]:
     """MDS-MAP initializer on AnchorFree-v0 per window length: mirror failures, yaw and shape errors."""
-    from swarmloc.agents.init.initializer import InitConfig, MdsMapInitializer
+    from swarmloc.agents.estimators.init.initializer import InitConfig, MdsMapInitializer
     from swarmloc.bench.evaluation.alignment import yaw_translation_fit
 
     out = {}

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.federated import federated, federated_fdi, gps_ins
+from swarmloc.agents.estimators.federated import federated, federated_fdi, gps_ins
 from swarmloc.bench.reproduce.common import (
     Factory,
     episode_errors,
@@ -28,7 +28,7 @@ from swarmloc.bench.reproduce.common import (
     seeds_from,
     write_paper_report,
 )
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 #: federated Table 2 (no fault, follower UAV 1): scheme → (RMSE E, N, U), (mean E, N, U) [m]
 PAPER_FED_TABLE2 = {"scheme 1 (gps-ins)": ((2.10, 2.43, 1.85), (1.68, 1.99, 1.44)),

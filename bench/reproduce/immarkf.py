@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.imm import make_imm
+from swarmloc.agents.estimators.imm import make_imm
 from swarmloc.bench.reproduce.common import (
     Factory,
     episode_errors,
@@ -28,7 +28,7 @@ from swarmloc.bench.reproduce.common import (
     seeds_from,
     write_paper_report,
 )
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 #: imm-arkf Table 2: (filter, ratio %) → RMSE mean, std at R = 0.5, 1.5, 8 and avg time (ms)
 PAPER_IMM_TABLE2: dict[tuple[str, int], tuple[tuple[float, float], ...]] = {

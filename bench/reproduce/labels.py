@@ -1,11 +1,11 @@
-"""``swarmloc reproduce labels``: the calibration of the error labels (``swarmloc.envs.labels``).
+"""``swarmloc reproduce labels``: the calibration of the error labels (``swarmloc.envs.world.labels``).
 
 The oracle on the error labels must be the ceiling of the trust policies and still an estimator.
 On every standard-v0 task (its 32 test seeds) this report runs the oracle at several label
 thresholds through the runner (``evaluate_methods``, the leaderboard's metrics) and compares
 it, per seed, with
 
-* the best shipped non-privileged Track A method (``leaderboard/results``): the oracle must
+* the best shipped non-privileged Track A method (``bench/results``): the oracle must
   not be worse (paired 95 % bootstrap CI of the difference not above 0); on
   CascadedFault-v0 its healthy-node RMSE must be below mappo's;
 * the information bound (``bound_rmse``): the oracle's task mean must not be below the
@@ -28,12 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.classical import ALPHA_MIN, OracleTrust
-from swarmloc.bench.common.reports import markdown_table
+from swarmloc.agents.trust.classical import ALPHA_MIN, OracleTrust
+from swarmloc.bench.reports.markdown import markdown_table
 from swarmloc.bench.reproduce.common import paired, write_paper_report
-from swarmloc.envs.channels import GPS, PEER_REL, build_layout
-from swarmloc.envs.labels import LABEL_SIGMAS, VECTOR_LABEL_SIGMAS, equivalent_radius
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.channels import GPS, PEER_REL, build_layout
+from swarmloc.envs.world.labels import LABEL_SIGMAS, VECTOR_LABEL_SIGMAS, equivalent_radius
+from swarmloc.envs.tasks.catalogue import get_spec
 
 CASCADED = "swarmloc/CascadedFault-v0"
 _HERE = "swarmloc.bench.reproduce.labels"
@@ -210,12 +210,12 @@ def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: 
         out: Markdown file or folder (``<out>/labels.md``).
         workers: worker processes of the runner.
         seeds: test seeds per task (the first ``seeds`` of standard-v0's 32), at least 2.
-        results_dir: the shipped results (default: ``leaderboard/results``).
+        results_dir: the shipped results (default: ``bench/results``).
         progress: show the runner's progress bars.
     """
     from swarmloc.bench.evaluation.runner import evaluate_methods
     from swarmloc.bench.evaluation.suites import Suite, get_suite
-    from swarmloc.leaderboard.shipped import RESULTS_DIR
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
     if not 2 <= seeds <= 32:
         raise ValueError(f"seeds must be in [2, 32] (standard-v0's test seeds), got {seeds}")
@@ -224,7 +224,7 @@ def reproduce_labels(out: Path, workers: int = 2, seeds: int = 32, results_dir: 
     by_task = {t: standard.seeds(t)[:seeds] for t in tasks}
     vector_tasks = [t for t in tasks if has_vector_channels(t)]
     episodes = lambda ts: tuple((t, s) for t in ts for s in by_task[t])  # noqa: E731
-    shipped = shipped_per_seed(results_dir or RESULTS_DIR, tasks, by_task)
+    shipped = shipped_per_seed(results_dir or RESULTS_DIRS["standard-v0"], tasks, by_task)
 
     everywhere = sorted({m for _, m in TABLES["scalar k (ranges), 3-vector radius as shipped"]})
     vector_only = sorted({m for title, cols in TABLES.items() if title.startswith(VECTOR_TABLES)
@@ -260,12 +260,12 @@ def _intro(seeds: int) -> list[str]:
         "",
         "A channel-step is labelled when its systematic error as the filter uses it (injected bias, GPS",
         "drift, heavy-tail excess; for a peer link the neighbour's broadcast-estimate error) exceeds a",
-        "threshold in units of σ_eff (`swarmloc.envs.labels`): k for a scalar range, a Mahalanobis radius",
+        "threshold in units of σ_eff (`swarmloc.envs.world.labels`): k for a scalar range, a Mahalanobis radius",
         f"for a 3-vector channel (GPS, relative position). Shipped: **k = {LABEL_SIGMAS:g}** and the radius",
         f"of a {VECTOR_LABEL_SIGMAS:g}σ false alarm, **r = {r:.2f}**. The `oracle` gives α_min to every labelled",
         "channel. Cells: the oracle's task-mean RMSE [m] over "
         f"{seeds} test seeds and its ratio to the best shipped",
-        "non-privileged Track A method (`leaderboard/results`); `=` not resolved from it (paired 95 %",
+        "non-privileged Track A method (`bench/results`); `=` not resolved from it (paired 95 %",
         "bootstrap CI of the difference contains 0), `✗` significantly worse, `↓bound` task mean below",
         "the information bound's (`bound_rmse`). A trust policy on the CEKF has no more information than",
         "the bound (the unlabelled measurements and the IMU); an oracle below it chooses links by the truth",
@@ -298,4 +298,4 @@ def _verdict(summaries: dict[str, dict[str, Any]], tasks: list[str]) -> list[str
                    for f in [failures(summaries[m][t])] if f]
             lines.append(f"- {title}, {name}: " + ("passes" if not why else "fails — " + "; ".join(why)))
     return lines + ["", f"Shipped: k = {LABEL_SIGMAS:g} for ranges, the {VECTOR_LABEL_SIGMAS:g}σ false-alarm radius for 3-vector "
-                    "channels (`envs/labels.py`).", ""]
+                    "channels (`envs/world/labels.py`).", ""]

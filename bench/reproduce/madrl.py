@@ -37,13 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.agents.registry import LoadedMethod, load_method
-from swarmloc.bench.common.reports import markdown_table, write_report
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.reports.markdown import markdown_table, write_report
+from swarmloc.bench.scoring import metrics as M
 from swarmloc.bench.evaluation.runner import evaluate_task, rollout
-from swarmloc.bench.evaluation.stats import bootstrap_ci
+from swarmloc.bench.scoring.stats import bootstrap_ci
 from swarmloc.bench.evaluation.suites import TEST_SEED_START
-from swarmloc.envs.channels import ANCHOR
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.channels import ANCHOR
+from swarmloc.envs.tasks.catalogue import get_spec
 
 #: madrl's tables (the paper's numbers, in its units)
 PAPER = {
@@ -228,14 +228,14 @@ def exp6(runs: Runs, seeds: list[int]) -> list[str]:
     lines = [f"## Exp. 6 — ablations (Tables 7, 8), {task.removeprefix('swarmloc/')}", ""] + markdown_table(
         ["group", "fault RMSE [m]", "jitter mean \\|Δα\\|", "weight variance", "paper interference RMSE"], rows)
     # Table 8: smoothing sensitivity γ, same weights
-    from swarmloc.agents.mappo_policy import (
+    from swarmloc.agents.mappo.policy import (
         BETA_MAX,
         MappoPolicy,
         load_actor,
         shipped_weights,
         weights_kinds,
     )
-    from swarmloc.agents.smoothing import MarkovSmoothing
+    from swarmloc.agents.trust.smoothing import MarkovSmoothing
 
     weights = Path(runs.weights.get("mappo") or shipped_weights("mappo", runs.version))
     actor, kinds = load_actor(weights), weights_kinds(weights)  # as the registered ``mappo`` builds it
@@ -320,7 +320,7 @@ def reproduce_madrl(out: str | os.PathLike[str] = "madrl.md", seeds: int = 32, t
     Returns:
         The path of the report.
     """
-    from swarmloc.agents.mappo_policy import shipped_weights, weights_metadata
+    from swarmloc.agents.mappo.policy import shipped_weights, weights_metadata
 
     if version not in FAULT_TEXT:
         raise ValueError(f"version must be one of {sorted(FAULT_TEXT)}, got {version!r}")

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.init import mdsmap_init, nls_init
+from swarmloc.agents.estimators.init import mdsmap_init, nls_init
 
 PAPER_TABLE1 = {
     "nls": {"mean_error_m": 0.34, "var_error_m2": 0.045, "ci95_m": (0.32, 0.36), "mean_ms": 152.6},

@@ -4,7 +4,7 @@ Every registered task's CEKF fuses a peer measurement with the neighbour's broad
 position taken as a known point (madrl §2.3, ``FilterSettings.peer_update = "point"``). A
 UAV and its neighbour then count each other's information again at every step, and the
 filters' covariances shrink below their errors. ``"ci"`` fuses the same measurement by
-covariance intersection, which stays consistent whatever the correlation (``envs/cekf.py``).
+covariance intersection, which stays consistent whatever the correlation (``envs/filter/cekf.py``).
 
 For each standard-v1 task with peer channels, the same test episodes under both updates:
 the trust policies that probe a task's calibration (``uniform``, the privileged ``oracle``,
@@ -25,14 +25,14 @@ from typing import Sequence
 import numpy as np
 
 from swarmloc.agents.registry import load_method
-from swarmloc.bench.evaluation.bounds import episode_bounds
+from swarmloc.bench.scoring.bounds import episode_bounds
 from swarmloc.bench.evaluation.runner import rollout
 from swarmloc.bench.evaluation.suites import STANDARD_V1_TASKS
 from swarmloc.bench.reproduce import calibration_criteria as C
 from swarmloc.bench.reproduce.common import seeds_from, write_paper_report
-from swarmloc.envs.channels import PEER, PEER_REL, build_layout
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.channels import PEER, PEER_REL, build_layout
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 #: the trust policies compared (the oracle is privileged; the others are not)
 METHODS: tuple[str, ...] = ("uniform", "oracle", "non-cooperative", "chi2-gate", "chi2-soft")

@@ -28,25 +28,25 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.pf.filters import ParticleFilter, PFNNOnlineOracle
+from swarmloc.agents.estimators.pf.filters import ParticleFilter, PFNNOnlineOracle
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.agents.registry import load_method
-from swarmloc.bench.common.reports import write_report
-from swarmloc.bench.evaluation import metrics as M
+from swarmloc.bench.reports.markdown import write_report
+from swarmloc.bench.scoring import metrics as M
 from swarmloc.bench.evaluation.runner import rollout
-from swarmloc.bench.evaluation.stats import bootstrap_ci
+from swarmloc.bench.scoring.stats import bootstrap_ci
 from swarmloc.bench.evaluation.suites import TEST_SEED_START
 from swarmloc.bench.speed.estimators import record, time_cekf, time_estimator
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/Indoor-v1"
 #: method label → entry point (registry names once the PF family is registered)
 METHODS: dict[str, str] = {
-    "pf": "swarmloc.agents.pf.filters:make_pf",
-    "pf-800": "swarmloc.agents.pf.filters:make_pf800",
-    "adaptive-pf": "swarmloc.agents.pf.filters:make_adaptive_pf",
-    "pf-nn": "swarmloc.agents.pf.filters:make_pfnn",
+    "pf": "swarmloc.agents.estimators.pf.filters:make_pf",
+    "pf-800": "swarmloc.agents.estimators.pf.filters:make_pf800",
+    "adaptive-pf": "swarmloc.agents.estimators.pf.filters:make_adaptive_pf",
+    "pf-nn": "swarmloc.agents.estimators.pf.filters:make_pfnn",
     "cekf-uniform": "uniform",
 }
 ORACLE = "pf-nn-online-oracle"
@@ -150,7 +150,7 @@ def ordering(results: dict[str, MethodResult]) -> list[dict]:
 
 def table5(steps: int) -> dict[str, dict]:
     """Time per step [ms] of each method at B = 1 on one recorded Indoor-v0 episode."""
-    from swarmloc.agents.pf import filters
+    from swarmloc.agents.estimators.pf import filters
 
     rec = record(1, steps)
     makers = {"pf": filters.make_pf, "pf-800": filters.make_pf800, "adaptive-pf": filters.make_adaptive_pf,

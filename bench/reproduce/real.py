@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.common.reports import markdown_table, report_path
+from swarmloc.bench.reports.markdown import markdown_table, report_path
 from swarmloc.bench.evaluation.suites import REAL_V1_TASKS, TEST_SEED_START, Suite, get_suite
 from swarmloc.bench.reproduce.common import write_paper_report
 
@@ -79,8 +79,8 @@ def flight_diagnostics(task: str, overrides: dict | None = None) -> dict[str, An
     first test seed when the range differences whose residual exceeds ``GROSS`` are left
     out (the truth decides: a diagnosis, not a method).
     """
-    from swarmloc.envs.core import LinkTrustCore
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.world.core import LinkTrustCore
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     spec = get_spec(task, **(overrides or {}))
     core = LinkTrustCore(spec, 1)
@@ -109,7 +109,7 @@ def plot_error_vs_time(runs: dict, path: Path) -> Path | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from swarmloc.bench.evaluation.method_style import method_styles
+    from swarmloc.bench.reports.method_style import method_styles
 
     styles = method_styles(PLOT_METHODS)
     traces = {(m, tr.task): tr for m in PLOT_METHODS if m in runs for tr in runs[m].traces}
@@ -165,7 +165,7 @@ def reproduce_real(out: str | Path, methods: list[str] | None = None, *, workers
     from swarmloc.agents.registry import method_names
     from swarmloc.bench.evaluation.runner import evaluate_methods
     from swarmloc.bench.evaluation.suites import require_data
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     full = get_suite("real-v1")
     if not 1 <= seeds <= 4:
@@ -256,7 +256,7 @@ def _render(suite: Suite, methods: list[str], real: dict, simulated: dict, diagn
                   "task's pairs, superseded by a later arrival in the same 10 ms step, used. Residuals of the "
                   "used rows against the truth (the UWB tag): pooled robust std (1.4826·MAD), share beyond "
                   f"{GROSS} m, share with a fault label (|residual| > 3σ). Noise settings of each task (measured: "
-                  "`envs/tasks.py`)."), ""]
+                  "`envs/tasks/catalogue.py`)."), ""]
         rows = []
         for t in tdoa:
             d = diagnostics[t]

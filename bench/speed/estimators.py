@@ -5,7 +5,7 @@ Rows (``impl``), all on the same recorded Indoor-v0 measurements (6 UAVs, B epis
 * ``pf-nn`` — the batched numba PF-NN step at the paper's average particle count
   (720 per UAV, held fixed so every repeat does the same work; pf-nn Table 4/5);
 * ``pf-nn-numpy-reference`` — the same filter written the straightforward way (a Python
-  loop over UAVs, numpy over particles: ``agents/pf/reference.py``), same particles, same
+  loop over UAVs, numpy over particles: ``agents/estimators/pf/reference.py``), same particles, same
   random numbers; ``speedup_vs_reference`` on the ``pf-nn`` row is the ratio of the two;
 * ``pf``, ``pf-800``, ``adaptive-pf`` and ``pf-nn`` (adaptive) as shipped, and ``cekf``
   (the uniform-trust CEKF predict + update kernels) — the time-per-step column of
@@ -27,13 +27,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from swarmloc.agents.pf.filters import ADAPTIVE, FIXED_800, STANDARD, ParticleFilter, PFConfig
-from swarmloc.agents.pf.pfnn import PFNNWeights, load_weights, random_weights
-from swarmloc.agents.pf.reference import ReferenceParticleFilter
+from swarmloc.agents.estimators.pf.filters import ADAPTIVE, FIXED_800, STANDARD, ParticleFilter, PFConfig
+from swarmloc.agents.estimators.pf.pfnn import PFNNWeights, load_weights, random_weights
+from swarmloc.agents.estimators.pf.reference import ReferenceParticleFilter
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
-from swarmloc.envs import cekf
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/Indoor-v0"
 #: the paper's average PF-NN particle count (pf-nn Table 4)

@@ -19,7 +19,7 @@ import time
 from collections.abc import Sequence
 
 from swarmloc.bench.evaluation.suites import Suite, get_suite
-from swarmloc.envs.tasks import get_spec
+from swarmloc.envs.tasks.catalogue import get_spec
 
 METHOD = "pf"
 """The particle filter: a few seconds per task, so that start-up and scheduling are not the whole measurement."""

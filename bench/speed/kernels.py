@@ -25,11 +25,11 @@ import numba
 import numpy as np
 
 from swarmloc.bench.common.files import write_text_atomic
-from swarmloc.envs import cekf
-from swarmloc.envs.cekf_reference import run_reference
-from swarmloc.envs.core import SERIAL_BELOW
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.cekf_reference import run_reference
+from swarmloc.envs.world.core import SERIAL_BELOW
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 BATCHES = (1, 64, 1024, 4096)
 #: ``--quick`` (a smoke run): batches below ``SERIAL_BELOW``, so that it compiles only the

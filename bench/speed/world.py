@@ -3,7 +3,7 @@
 Rows (``impl``), Scale6-v0 (6 UAVs, 13 channels each), uniform trust:
 
 * ``world`` — ``LinkTrustCore.step``: truth, sensors, faults, the trust-weighted CEKF
-  update, prediction and features in one kernel call per step (``envs/core_kernel.py``).
+  update, prediction and features in one kernel call per step (``envs/world/core_kernel.py``).
 * ``world-unfused`` — the same step composed from the separate batch kernels
   (``World.sense``, ``cekf_update``, ``cekf_predict``, ``channel_features``) with NumPy
   copies in between: the core's path before the fused kernel (``UnfusedCore``; same
@@ -21,11 +21,11 @@ import time
 import numpy as np
 
 from swarmloc.bench.speed.kernels import BATCHES, QUICK_BATCHES
-from swarmloc.envs import cekf
-from swarmloc.envs.core import LinkTrustCore
-from swarmloc.envs.specs import TaskSpec
-from swarmloc.envs.tasks import get_spec
-from swarmloc.envs.world import World
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.tasks.catalogue import get_spec
+from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/Scale6-v0"
 

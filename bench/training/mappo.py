@@ -1,6 +1,6 @@
 """``swarmloc train mappo``: the MAPPO training script with the bench's seeds and evaluation.
 
-The algorithm lives in ``swarmloc.agents.mappo`` (agents may not import bench); this
+The algorithm lives in ``swarmloc.agents.mappo.train`` (agents may not import bench); this
 glue adds what needs the bench: training episode seeds are checked with
 ``check_training_seeds`` (test and dev seeds are refused), the periodic evaluation runs
 the smoothed policy on **dev** seeds through the runner, and the weights are written as
@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.mappo_config import MappoConfig, SetGruConfig
+from swarmloc.agents.mappo.config import MappoConfig, SetGruConfig
 from swarmloc.bench.common.files import atomic_path, write_text_atomic
 from swarmloc.bench.common.provenance import source_commit
-from swarmloc.envs.seeds import DEV_SEED_START, check_training_seeds
+from swarmloc.envs.tasks.seeds import DEV_SEED_START, check_training_seeds
 
 #: tasks and metric of the periodic dev evaluation (the issue-5 targets' metrics)
 EVAL_TASKS: dict[str, str] = {
@@ -47,7 +47,7 @@ EVAL_TASKS_V1: dict[str, str] = {
 
 def eval_tasks(training_tasks) -> dict[str, str]:
     """The dev-evaluation tasks of a run: v1's when every training task is a v1 task, else v0's."""
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     return EVAL_TASKS_V1 if all(get_spec(t).version >= 1 for t in training_tasks) else EVAL_TASKS
 
@@ -78,8 +78,8 @@ def command_line() -> str:
 
 
 #: the code a MAPPO training run depends on (its provenance is "dirty" if any of it changed)
-TRAINING_CODE = ("envs", "agents/mappo.py", "agents/mappo_config.py", "agents/mappo_nets.py", "agents/mappo_policy.py",
-                 "agents/mappo_collect.py", "agents/mappo_set_gru.py", "agents/set_gru_policy.py", "agents/smoothing.py",
+TRAINING_CODE = ("envs", "agents/mappo/train.py", "agents/mappo/config.py", "agents/mappo/nets.py", "agents/mappo/policy.py",
+                 "agents/mappo/collect.py", "agents/mappo/set_gru.py", "agents/mappo/set_gru_policy.py", "agents/trust/smoothing.py",
                  "bench/training/mappo.py")
 
 
@@ -96,9 +96,9 @@ def dev_evaluator(n_seeds: int, tasks: dict[str, str] = EVAL_TASKS, method_name:
     ``{"<Task>/<metric>": value, "<Task>/<metric>_vs_uniform": ratio}`` (means over seeds).
     """
     from swarmloc.agents.registry import LoadedMethod, load_method
-    from swarmloc.agents.smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing
+    from swarmloc.agents.trust.smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmoothing
     from swarmloc.bench.evaluation.runner import rollout
-    from swarmloc.envs.tasks import get_spec
+    from swarmloc.envs.tasks.catalogue import get_spec
 
     seeds = list(range(DEV_SEED_START, DEV_SEED_START + n_seeds))
     uniform: dict[str, float] = {}
@@ -139,12 +139,12 @@ def train_mappo(config: TrainMappoArgs | TrainSetGruArgs) -> Path:
     import torch
 
     if isinstance(config, SetGruConfig):
-        from swarmloc.agents.mappo_set_gru import train
+        from swarmloc.agents.mappo.set_gru import train
 
-        # the set + GRU actor executes unsmoothed (``agents/set_gru_policy.py``), the paper's actor smoothed
+        # the set + GRU actor executes unsmoothed (``agents/mappo/set_gru_policy.py``), the paper's actor smoothed
         method, default_name, smoothed = "mappo-set-gru", "mappo_set_gru.pt", False
     else:
-        from swarmloc.agents.mappo import train
+        from swarmloc.agents.mappo.train import train
 
         method = "mappo-accuracy-only" if config.accuracy_only else "mappo"
         default_name, smoothed = "mappo.pt", True

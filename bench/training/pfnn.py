@@ -1,6 +1,6 @@
 """``swarmloc train pfnn``: fit the PF-NN weight-correction network offline, on training seeds.
 
-The fit itself lives in ``swarmloc.agents.pf.train`` (agents may not import bench); this
+The fit itself lives in ``swarmloc.agents.estimators.pf.train`` (agents may not import bench); this
 glue adds what needs the bench: the episode seeds are checked with
 ``check_training_seeds`` (test and dev seeds are refused), and the weights are written
 with their provenance beside them (``<weights>.json``: the exact command that reproduces
@@ -24,12 +24,12 @@ from typing import TYPE_CHECKING
 from swarmloc.agents.registry import WEIGHTS_DIR
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import collect_provenance
-from swarmloc.envs.seeds import check_training_seeds
+from swarmloc.envs.tasks.seeds import check_training_seeds
 
 if TYPE_CHECKING:
-    from swarmloc.agents.pf.train import FitConfig, FitResult
+    from swarmloc.agents.estimators.pf.train import FitConfig, FitResult
 
-#: the shipped weights (``swarmloc.agents.pf.pfnn.WEIGHTS_PATH``, named here without importing the PF kernels)
+#: the shipped weights (``swarmloc.agents.estimators.pf.pfnn.WEIGHTS_PATH``, named here without importing the PF kernels)
 WEIGHTS_PATH = WEIGHTS_DIR / "pfnn.npz"
 
 
@@ -114,7 +114,7 @@ def train_pfnn(args: TrainPfnnArgs, log=print) -> Path:
         raise ValueError(f"seeds={args.seeds} must be >= 1")
     seeds = tuple(range(args.seed_start, args.seed_start + args.seeds))
     check_training_seeds(seeds)
-    from swarmloc.agents.pf.train import FitConfig, fit_pfnn
+    from swarmloc.agents.estimators.pf.train import FitConfig, fit_pfnn
 
     fit = FitConfig(task=args.task, seeds=seeds, duration=args.duration, rounds=args.rounds, epochs=args.epochs,
                     lr=args.lr, torch_seed=args.torch_seed)

@@ -18,7 +18,7 @@ from pathlib import Path
 from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.plugins import event_priority
 
-ROOMS = ("envs", "agents", "bench", "leaderboard")
+ROOMS = ("envs", "agents", "bench", "leaderboard", "cli")
 
 _staged: list[Path] = []
 

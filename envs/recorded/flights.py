@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..specs import RecordedFlight, TaskSpec
-from .util_flight import Recording, load_recording
+from swarmloc.envs.tasks.specs import RecordedFlight, TaskSpec
+from swarmloc.envs.recorded.util_flight import Recording, load_recording
 
 
 def _flight(spec: TaskSpec) -> RecordedFlight:
@@ -35,10 +35,10 @@ def dataset_folder(spec: TaskSpec, data_dir: str | Path | None = None) -> Path:
         FileNotFoundError: the folder is missing (the message says where the data comes from).
     """
     if _flight(spec).dataset == "util-tdoa":
-        from .tdoa_import import find_tdoa_data
+        from swarmloc.envs.recorded.tdoa_import import find_tdoa_data
 
         return find_tdoa_data(data_dir)
-    from .util_import import find_util_data
+    from swarmloc.envs.recorded.util_import import find_util_data
 
     return find_util_data(data_dir)
 
@@ -52,7 +52,7 @@ def load_flight(spec: TaskSpec, data_dir: str | Path | None = None) -> tuple[Pat
     flight = _flight(spec)
     folder = dataset_folder(spec, data_dir)
     if flight.dataset == "util-tdoa":
-        from .tdoa_flight import load_tdoa_recording
+        from swarmloc.envs.recorded.tdoa_flight import load_tdoa_recording
 
         tdoa = spec.sensors.tdoa
         return folder, load_tdoa_recording(folder, flight.log, float(flight.start), spec.n_steps, float(spec.dt),
@@ -68,12 +68,12 @@ def flight_data_missing(spec: TaskSpec, data_dir: str | Path | None = None) -> s
     """
     flight = _flight(spec)
     if flight.dataset == "util-tdoa":
-        from .tdoa_import import IMPORT_COMMAND
-        from .tdoa_import import TDOA_SOURCE as SOURCE
+        from swarmloc.envs.recorded.tdoa_import import IMPORT_COMMAND
+        from swarmloc.envs.recorded.tdoa_import import TDOA_SOURCE as SOURCE
         what = "UTIL TDOA flight"
     else:
-        from .util_import import IMPORT_COMMAND
-        from .util_import import UTIL_SOURCE as SOURCE
+        from swarmloc.envs.recorded.util_import import IMPORT_COMMAND
+        from swarmloc.envs.recorded.util_import import UTIL_SOURCE as SOURCE
         what = "UTIL TWR log"
     try:
         folder = dataset_folder(spec, data_dir)

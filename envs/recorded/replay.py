@@ -1,7 +1,7 @@
 """A recorded flight behind the world interface: ``RecordedWorld`` replays, it simulates nothing.
 
 ``RecordedWorld(spec, B)`` exposes what ``LinkTrustCore`` and the bench runner use of
-``swarmloc.envs.world.World`` — ``spec``, ``batch_size``, ``layout``, ``anchors``,
+``swarmloc.envs.world.sim.World`` — ``spec``, ``batch_size``, ``layout``, ``anchors``,
 ``landmarks``, ``buffers``, ``seeds``, ``steps``, ``x0``, ``times``, ``reset(seeds,
 mask)``, ``sense()`` — so the CEKF backbone and every estimator run on real data
 unchanged. The spec's trajectory is a ``RecordedFlight`` (which log, where step 0 is,
@@ -33,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..channels import ChannelLayout, build_layout
-from ..labels import label_thresholds
-from ..rng import Stream, normal
-from ..specs import RecordedFlight, TaskSpec
-from ..world import SenseBuffers, reset_indices
-from .flights import load_flight
-from .util_flight import Recording
+from swarmloc.envs.tasks.channels import ChannelLayout, build_layout
+from swarmloc.envs.world.labels import label_thresholds
+from swarmloc.envs.tasks.rng import Stream, normal
+from swarmloc.envs.tasks.specs import RecordedFlight, TaskSpec
+from swarmloc.envs.world.sim import SenseBuffers, reset_indices
+from swarmloc.envs.recorded.flights import load_flight
+from swarmloc.envs.recorded.util_flight import Recording
 
 _INIT = int(Stream.INIT)
 

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .util_flight import (
+from swarmloc.envs.recorded.util_flight import (
     MAD_TO_SIGMA,
     VELOCITY_HALF_SPAN,
     Recording,

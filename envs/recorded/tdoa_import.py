@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cfusdlog import UsdLog, read_usd_log
-from .util_import import DATA_ENV_VAR, Table, data_root, install_folder
+from swarmloc.envs.recorded.cfusdlog import UsdLog, read_usd_log
+from swarmloc.envs.recorded.util_import import DATA_ENV_VAR, Table, data_root, install_folder
 
 __all__ = [
     "DATASET_DIR",

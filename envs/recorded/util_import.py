@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cfusdlog import UsdLog, read_usd_log
+from swarmloc.envs.recorded.cfusdlog import UsdLog, read_usd_log
 
 __all__ = [
     "IMPORT_COMMAND",

@@ -1,0 +1,1 @@
+"""MAPPO link trust: configuration, networks, collection, training and execution-time policies."""

@@ -1,0 +1,1 @@
+"""Track A link-trust policies: classical baselines, integrity monitors, the oracle, smoothing."""

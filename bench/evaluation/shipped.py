@@ -1,0 +1,65 @@
+"""The shipped reference results: one results file per shipped method and suite.
+
+``bench/results/standard-v1/<method>.json`` are the results of the shipped methods on
+``standard-v1``, the default board; ``bench/results/standard-v0/<method>.json`` those of the
+frozen ``standard-v0``. Each is what ``swarmloc evaluate --method <method> --suite <suite>``
+writes; ``swarmloc reproduce shipped`` regenerates them. They travel in the wheel as package
+data. The leaderboard stores them (``swarmloc.leaderboard.store.shipped``); the calibration
+and label reports compare against them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+#: the suite of the default board
+DEFAULT_SUITE = "standard-v1"
+#: the shipped results of each suite, default board first
+RESULTS_DIRS: dict[str, Path] = {
+    suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v0")
+}
+
+
+def shipped_results(results_dir: Path | None = None) -> list[Path]:
+    """The shipped results files of one folder in name order (default: every suite's, ``RESULTS_DIRS`` order)."""
+    if results_dir is not None:
+        return sorted(results_dir.glob("*.json"))
+    return [path for folder in RESULTS_DIRS.values() for path in sorted(folder.glob("*.json"))]
+
+
+def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers: int = 2) -> list[Path]:
+    """Re-evaluate ``methods`` on a suite into its shipped results folder (traces are not kept).
+
+    All methods run in one evaluation, so the references every episode needs (uniform, the
+    information bound) are computed once per worker, not once per method.
+
+    Args:
+        methods: method names (default of the command: every method with a shipped file of the suite).
+        suite_name: a suite of ``RESULTS_DIRS``.
+        workers: worker processes.
+
+    Returns:
+        The files written.
+
+    Raises:
+        KeyError: the suite has no shipped results.
+        RuntimeError: a job failed (nothing is written).
+    """
+    from swarmloc.bench.evaluation.results import write_results
+    from swarmloc.bench.evaluation.runner import evaluate_methods
+    from swarmloc.bench.evaluation.suites import get_suite
+
+    if suite_name not in RESULTS_DIRS:
+        raise KeyError(f"suite {suite_name!r} has no shipped results; allowed: {', '.join(RESULTS_DIRS)}")
+    results_dir = RESULTS_DIRS[suite_name]
+    results_dir.mkdir(parents=True, exist_ok=True)
+    suite = get_suite(suite_name)
+    runs = evaluate_methods(list(methods), suite, workers=workers, trace=False)
+    failed = {name: run.failed for name, run in runs.items() if run.failed}
+    if failed:
+        raise RuntimeError(f"not regenerated, some jobs failed: {failed}")
+    written = []
+    for name, run in runs.items():
+        written.append(write_results(results_dir / f"{name}.json", run.results(suite)))
+    return written

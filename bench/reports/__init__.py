@@ -1,0 +1,1 @@
+"""Presenting results: plots, method styles, the demo tables and Markdown reports."""

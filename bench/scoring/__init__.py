@@ -1,0 +1,1 @@
+"""Scoring evaluated episodes: metrics, the score, statistics, bounds, families, comparisons."""

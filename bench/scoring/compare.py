@@ -1,0 +1,187 @@
+"""Two results files of one suite, compared episode by episode: is B better than A, and where?
+
+The question a researcher asks between two runs (a new method against a baseline, new
+weights against the shipped ones, two training seeds) before submitting anything. Both
+files ran the same (task, seed) episodes, so the comparison is paired: per episode the
+difference of the gains over uniform (the score, ``docs/scoring.md``), which is
+``log2(RMSE_A / RMSE_B)`` — uniform's RMSE cancels. Per task the mean difference with its
+paired bootstrap CI; over the suite ``S_B − S_A`` with the CI the leaderboard ranks by
+(:func:`swarmloc.bench.scoring.score.paired_difference`), and rliable's probability of
+improvement ``P(B > A)``.
+
+Both files ran one suite, or part of it (``--tasks``: ``<suite>-subset``). Only episodes
+both files hold are compared, and only tasks both methods cover (a null RMSE
+on a seed leaves the task out, as on the leaderboard); what was left out is listed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import math
+
+import numpy as np
+
+from swarmloc.bench.evaluation.results import Results
+from swarmloc.bench.scoring.score import (
+    DEFAULT_RESAMPLES,
+    DEFAULT_SEED,
+    PairedDifference,
+    SuiteScore,
+    paired_difference,
+    probability_of_improvement,
+    suite_score,
+)
+
+
+@dataclass(frozen=True)
+class TaskComparison:
+    """One task: both methods' mean RMSE and gain, and B − A.
+
+    Attributes:
+        task: task ID.
+        rmse_a, rmse_b: task-mean RMSE [m] over the compared seeds.
+        gain_a, gain_b: ``G_t`` of each (log2 units over uniform).
+        difference: ``G_B − G_A`` with its paired CI; ``ahead`` counts seeds.
+    """
+
+    task: str
+    rmse_a: float
+    rmse_b: float
+    gain_a: float
+    gain_b: float
+    difference: PairedDifference
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """B against A on the tasks and seeds both cover.
+
+    Attributes:
+        name_a, name_b: the two methods' names.
+        suite: the suite name both files ran.
+        score_a, score_b: the score of each on the compared episodes.
+        difference: ``S_B − S_A`` with its paired CI; ``ahead`` counts tasks.
+        p_improvement: ``P(B > A)`` (rliable; per task over all seed pairs, mean over tasks).
+        tasks: per task, in the order of A's file.
+        left_out: tasks not compared, each with the reason.
+    """
+
+    name_a: str
+    name_b: str
+    suite: str
+    score_a: SuiteScore
+    score_b: SuiteScore
+    difference: PairedDifference
+    p_improvement: float
+    tasks: tuple[TaskComparison, ...]
+    left_out: tuple[tuple[str, str], ...]
+
+    @property
+    def b_ahead(self) -> bool:
+        """B ahead beyond doubt: the paired CI of ``S_B − S_A`` is above 0 (the leaderboard's rule)."""
+        return self.difference.ci_low > 0.0
+
+
+def _base_suite(name: str) -> str:
+    """The suite a run of part of it (``swarmloc evaluate --tasks``: ``<name>-subset``) belongs to."""
+    return name.removesuffix("-subset")
+
+
+def _episodes_by_task(results: Results) -> dict[str, dict[int, dict]]:
+    """task → seed → the episode as plain data (``{"task", "seed", "metrics"}``)."""
+    out: dict[str, dict[int, dict]] = {}
+    for e in results.episodes:
+        out.setdefault(e.task, {})[e.seed] = e.model_dump()
+    return out
+
+
+def _not_covered(rows: dict[int, dict], seeds: Sequence[int]) -> str | None:
+    """Why a method has no task score on these seeds (None when it has one)."""
+    if any(rows[s]["metrics"]["rmse"] is None for s in seeds):
+        return "null RMSE"
+    if any(rows[s]["metrics"]["uniform_rmse"] is None for s in seeds):
+        return "no uniform_rmse: a results file older than schema 2"
+    return None
+
+
+def _check_same_world(task: str, seeds: Sequence[int], rows_a: dict, rows_b: dict) -> None:
+    """Both files' uniform RMSE agree on every seed: the same episode, so uniform cancels in B − A."""
+    for s in seeds:
+        ua, ub = (rows[s]["metrics"]["uniform_rmse"] for rows in (rows_a, rows_b))
+        if not math.isclose(ua, ub, rel_tol=1e-9):
+            raise ValueError(f"{task} seed {s}: uniform's RMSE is {ua!r} in A and {ub!r} in B, so the two files did "
+                             "not run the same episode (a task or filter changed between them)")
+
+
+def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> Comparison:
+    """Compare results B against results A, paired on the episodes both hold.
+
+    Args:
+        a: the reference (baseline) results.
+        b: the results compared with it.
+        n_resamples, seed: of the paired bootstrap.
+
+    Returns:
+        The comparison; ``left_out`` names every task of either file that was not compared.
+
+    Raises:
+        ValueError: the files ran different suites or different episodes under one (task, seed)
+            (their uniform RMSE differ), or share no task both methods cover.
+    """
+    if _base_suite(a.suite.name) != _base_suite(b.suite.name):
+        raise ValueError(f"the results ran different suites ({a.suite.name!r} and {b.suite.name!r}); "
+                         "only the same episodes compare")
+    rows_a, rows_b = _episodes_by_task(a), _episodes_by_task(b)
+    left_out: list[tuple[str, str]] = []
+    kept_a, kept_b, seeds_of = [], [], {}
+    for task in list(rows_a) + [t for t in rows_b if t not in rows_a]:
+        if task not in rows_a or task not in rows_b:
+            left_out.append((task, f"only in {'A' if task in rows_a else 'B'}"))
+            continue
+        seeds = sorted(set(rows_a[task]) & set(rows_b[task]))
+        if not seeds:
+            left_out.append((task, "no seed in common"))
+            continue
+        why = [(label, _not_covered(rows[task], seeds)) for label, rows in (("A", rows_a), ("B", rows_b))]
+        if any(w for _, w in why):
+            left_out.append((task, "not covered by " + " and ".join(f"{label} ({w})" for label, w in why if w)))
+            continue
+        _check_same_world(task, seeds, rows_a[task], rows_b[task])
+        seeds_of[task] = seeds
+        kept_a += [rows_a[task][s] for s in seeds]
+        kept_b += [rows_b[task][s] for s in seeds]
+    names = list(seeds_of)
+    if not names:
+        raise ValueError(f"{a.method.name!r} and {b.method.name!r} share no covered task; left out: {left_out}")
+    score_a, score_b = suite_score(kept_a, names), suite_score(kept_b, names)
+    assert score_a is not None and score_b is not None  # every kept task is covered by both
+    suite_diff, task_diffs = paired_difference(score_a, score_b, n_resamples, seed)
+    tasks = []
+    for task, seeds in seeds_of.items():
+        rmse_a, rmse_b = (float(np.mean([rows[task][s]["metrics"]["rmse"] for s in seeds]))
+                          for rows in (rows_a, rows_b))
+        tasks.append(TaskComparison(task, rmse_a, rmse_b, score_a.tasks[task].mean, score_b.tasks[task].mean,
+                                    task_diffs[task]))
+    p = probability_of_improvement({t: s.gains for t, s in score_b.tasks.items()},
+                                   {t: s.gains for t, s in score_a.tasks.items()})
+    return Comparison(a.method.name, b.method.name, a.suite.name, score_a, score_b, suite_diff, p, tuple(tasks),
+                      tuple(left_out))
+
+
+def _difference_dict(d: PairedDifference) -> dict:
+    return {"mean": d.mean, "ci": [d.ci_low, d.ci_high], "ahead": d.ahead, "count": d.count}
+
+
+def comparison_dict(c: Comparison) -> dict:
+    """The comparison as plain JSON data (gains in log2 units over uniform, RMSE in metres)."""
+    return {
+        "suite": c.suite, "a": c.name_a, "b": c.name_b,
+        "score": {name: {"S": s.S, "ci": [s.ci_low, s.ci_high], "times": s.times}
+                  for name, s in (("a", c.score_a), ("b", c.score_b))},
+        "difference": _difference_dict(c.difference), "b_ahead": c.b_ahead, "p_improvement": c.p_improvement,
+        "tasks": [{"task": t.task, "rmse_a": t.rmse_a, "rmse_b": t.rmse_b, "gain_a": t.gain_a, "gain_b": t.gain_b,
+                   "difference": _difference_dict(t.difference)} for t in c.tasks],
+        "left_out": [{"task": task, "reason": why} for task, why in c.left_out],
+    }

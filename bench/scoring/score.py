@@ -1,0 +1,363 @@
+"""The score: how many times lower the error is than the standard CEKF's, per task and over a suite.
+
+Per episode the **gain** over uniform trust (the standard CEKF, α = 1, on the same episode)::
+
+    g = log2(RMSE_uniform / RMSE_method)        (g = 1: half the error; g = −1: twice)
+
+A task's score ``G_t`` is the mean of g over its seeds; the suite score ``S`` is the mean of
+``G_t`` over the tasks the method covers (tasks weigh equally, whatever their seed count),
+shown as ``2^S``: "× lower error than the standard CEKF". Its 95 % CI is a stratified
+bootstrap: seeds are resampled within each task, and ``S`` recomputed (rliable's
+recommendation for few runs per task). A log ratio bounds what one bad task can do: a
+method that diverges to 150 m where uniform has 1.5 m loses log2(100) ≈ 6.6 on that task,
+not the −50 that a score normalized by the gap to an oracle gave it (benchmark v0's, retired).
+
+Beside it, the information bound (``bound_rmse``, the posterior Cramér–Rao bound of the
+episode) gives each task an **achievable** gain ``A_t = mean log2(RMSE_uniform / bound)``
+and a **gap closed** ``G_t / A_t``, defined where ``A_t ≥ log2 1.25`` (a task where even
+the bound is within 25 % of uniform has no gap worth a ratio). Also here: the IQM of g,
+performance profiles and the probability of improvement (Agarwal et al. 2021, rliable;
+``docs/references.md`` [rliable]).
+
+A method that cannot run a task (null RMSE on any of its seeds) has no ``G_t`` there: its
+coverage is k/T, and it is compared only on the tasks it covers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmloc.bench.scoring.stats import iqm
+
+#: tasks whose bound is within this ratio of uniform have no gap-closed ratio
+MIN_ACHIEVABLE_GAIN = math.log2(1.25)
+DEFAULT_RESAMPLES = 2000
+DEFAULT_SEED = 0
+
+
+def episode_gain(rmse_uniform: float | None, rmse: float | None) -> float | None:
+    """``log2(RMSE_uniform / RMSE)`` of one episode; None when either is missing or not positive."""
+    if rmse_uniform is None or rmse is None:
+        return None
+    if not (math.isfinite(rmse_uniform) and math.isfinite(rmse)) or rmse_uniform <= 0.0 or rmse <= 0.0:
+        return None
+    return math.log2(rmse_uniform / rmse)
+
+
+@dataclass(frozen=True)
+class TaskScore:
+    """One method on one task.
+
+    Attributes:
+        task: task ID.
+        gains: ``(n,)`` per-seed gains g, in the order the episodes came.
+        mean: ``G_t``, the mean gain.
+        achievable: ``A_t`` = mean log2(RMSE_uniform / bound), None where the bound is undefined.
+        gap_closed: ``G_t / A_t`` where ``A_t ≥ log2 1.25``, else None.
+        seeds: ``(n,)`` the episode seed of each gain (None when not given): what pairs two methods.
+    """
+
+    task: str
+    gains: np.ndarray
+    mean: float
+    achievable: float | None
+    gap_closed: float | None
+    seeds: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class SuiteScore:
+    """One method on a suite (on the tasks it covers).
+
+    Attributes:
+        S: mean over covered tasks of ``G_t`` (log2 units).
+        ci_low, ci_high: stratified-bootstrap 95 % CI of S.
+        iqm: interquartile mean of every covered episode's g.
+        gap_closed: ``Σ G_t / Σ A_t`` over the tasks with a defined gap (None if none).
+        tasks: task → ``TaskScore`` for covered tasks.
+        uncovered: tasks of the suite the method could not run.
+    """
+
+    S: float
+    ci_low: float
+    ci_high: float
+    iqm: float
+    gap_closed: float | None
+    tasks: dict[str, TaskScore]
+    uncovered: tuple[str, ...]
+
+    @property
+    def times(self) -> float:
+        """``2^S``: how many times lower the error is than uniform's (geometric mean over tasks)."""
+        return 2.0**self.S
+
+    @property
+    def times_ci(self) -> tuple[float, float]:
+        """The CI of ``2^S``."""
+        return 2.0**self.ci_low, 2.0**self.ci_high
+
+    @property
+    def coverage(self) -> tuple[int, int]:
+        """``(k, T)``: tasks covered out of the suite's."""
+        return len(self.tasks), len(self.tasks) + len(self.uncovered)
+
+
+def task_score(task: str, gains: Sequence[float], achievable: Sequence[float | None] | None = None,
+               seeds: Sequence[int] | None = None) -> TaskScore:
+    """``G_t``, ``A_t`` and gap closed of one task from its per-seed gains and achievable gains.
+
+    Args:
+        task: task ID.
+        gains: per-seed g (all defined).
+        achievable: per-seed log2(RMSE_uniform / bound); ``A_t`` is None if any is None.
+        seeds: the seed of each gain (kept for pairing methods).
+    """
+    g = np.asarray(gains, dtype=np.float64)
+    if g.size == 0 or not np.isfinite(g).all():
+        raise ValueError(f"task {task}: gains must be a non-empty list of finite numbers, got {gains!r}")
+    mean = float(g.mean())
+    a = None
+    if achievable is not None and len(achievable) and all(v is not None for v in achievable):
+        a = float(np.mean(np.asarray(achievable, dtype=np.float64)))
+    closed = mean / a if a is not None and a >= MIN_ACHIEVABLE_GAIN else None
+    seed_arr = None if seeds is None else np.asarray(seeds, dtype=np.int64)
+    if seed_arr is not None and seed_arr.shape != g.shape:
+        raise ValueError(f"task {task}: {seed_arr.size} seeds for {g.size} gains")
+    return TaskScore(task=task, gains=g, mean=mean, achievable=a, gap_closed=closed, seeds=seed_arr)
+
+
+def bootstrap_suite_ci(tasks: Sequence[np.ndarray], n_resamples: int = DEFAULT_RESAMPLES,
+                       seed: int = DEFAULT_SEED, confidence: float = 0.95) -> tuple[float, float]:
+    """Stratified-bootstrap CI of the mean over tasks of the per-task mean.
+
+    Each resample draws every task's seeds with replacement (within the task) and
+    recomputes the mean of task means; the CI is the percentile interval.
+
+    Args:
+        tasks: per task, ``(n_t,)`` values.
+        n_resamples: resamples (≥ 1).
+        seed: generator seed (the CI is reproducible).
+        confidence: coverage in (0, 1).
+    """
+    if not tasks:
+        raise ValueError("need at least one task")
+    rng = np.random.default_rng(seed)
+    means = np.zeros(n_resamples)
+    for x in tasks:
+        x = np.asarray(x, dtype=np.float64)
+        picks = rng.integers(0, x.size, size=(n_resamples, x.size))
+        means += x[picks].mean(axis=1)
+    means /= len(tasks)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(means, [tail, 100.0 - tail])
+    return float(low), float(high)
+
+
+def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None = None, *,
+                n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> SuiteScore | None:
+    """The score of one method from its per-episode metrics.
+
+    Args:
+        episodes: ``{"task", "seed", "metrics": {"rmse", "uniform_rmse", "bound_rmse", ...}}``
+            (results-file episodes or their dumps).
+        suite_tasks: every task of the suite (for coverage); default: the tasks seen.
+        n_resamples, seed: of the bootstrap.
+
+    Returns:
+        The ``SuiteScore``, or None when the method covers no task.
+    """
+    by_task: dict[str, list[tuple[float | None, float | None, int]]] = {}
+    order: list[str] = []
+    for ep in episodes:
+        task = str(ep["task"] if isinstance(ep, Mapping) else ep.task)
+        m = ep["metrics"] if isinstance(ep, Mapping) else ep.metrics
+        m = m if isinstance(m, Mapping) else m.model_dump()
+        if task not in by_task:
+            by_task[task] = []
+            order.append(task)
+        gain = episode_gain(m.get("uniform_rmse"), m.get("rmse"))
+        bound = m.get("bound_rmse")
+        episode_seed = int(ep["seed"] if isinstance(ep, Mapping) else ep.seed)
+        by_task[task].append((gain, episode_gain(m.get("uniform_rmse"), bound) if bound else None, episode_seed))
+    all_tasks = list(suite_tasks) if suite_tasks is not None else order
+    covered: dict[str, TaskScore] = {}
+    for task in all_tasks:
+        rows = by_task.get(task, [])
+        if rows and all(g is not None for g, _, _ in rows):
+            covered[task] = task_score(task, [g for g, _, _ in rows], [a for _, a, _ in rows], [s for _, _, s in rows])
+    if not covered:
+        return None
+    S = float(np.mean([t.mean for t in covered.values()]))
+    low, high = bootstrap_suite_ci([t.gains for t in covered.values()], n_resamples, seed)
+    # the gain realised over the gain achievable, summed over the tasks with a gap: a ratio of sums, so
+    # that one task with a small achievable gain cannot swamp the suite (a mean of ratios would)
+    gapped = [t for t in covered.values() if t.gap_closed is not None]
+    closed = sum(t.mean for t in gapped) / sum(t.achievable for t in gapped) if gapped else None
+    return SuiteScore(S=S, ci_low=low, ci_high=high, iqm=iqm(np.concatenate([t.gains for t in covered.values()])),
+                      gap_closed=closed, tasks=covered,
+                      uncovered=tuple(t for t in all_tasks if t not in covered))
+
+
+def _paired_gains(scores: Sequence[SuiteScore], task: str) -> np.ndarray:
+    """``(methods, n)``: each score's gains on ``task`` in seed order, checked to be the same episodes."""
+    seeds, rows = None, []
+    for score in scores:
+        t = score.tasks.get(task)
+        if t is None or t.seeds is None:
+            raise ValueError(f"every score must cover {task} with its seeds to be paired")
+        order = np.argsort(t.seeds, kind="stable")
+        if seeds is not None and not np.array_equal(t.seeds[order], seeds):
+            raise ValueError(f"{task}: the scores ran different seeds; only the same episodes pair")
+        seeds = t.seeds[order]
+        rows.append(t.gains[order])
+    return np.stack(rows)
+
+
+def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
+                      seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per task, the ``(methods, n)`` paired gains and ``(methods, n_resamples)`` resampled task means.
+
+    One draw of seeds per resample is shared by every method.
+
+    The stratified bootstrap of :func:`bootstrap_suite_ci`, paired: each resample draws a
+    task's seeds once and applies that draw to every method, so two methods are compared
+    episode by episode (same task, same seed: the same world).
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    tasks = list(dict.fromkeys(task for score in scores for task in score.tasks))  # _paired_gains: all cover each
+    rng = np.random.default_rng(seed)
+    out = {}
+    for task in tasks:
+        gains = _paired_gains(scores, task)
+        picks = rng.integers(0, gains.shape[1], size=(n_resamples, gains.shape[1]))
+        out[task] = gains, gains[:, picks].mean(axis=2)
+    return out
+
+
+def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED,
+                    confidence: float = 0.95) -> list[int]:
+    """Each method's rank as 1 + the number of others whose S is higher beyond doubt.
+
+    "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0
+    (:func:`_paired_resamples`: the same episodes, one shared draw of seeds). Two methods
+    whose difference the seeds cannot resolve share a rank. Ranks are not always
+    consecutive: with A ahead of B beyond doubt and C level with both, the ranks are 1, 2, 1.
+
+    Args:
+        scores: suite scores covering the same tasks with the same seeds (every method of a
+            suite's ranked table does).
+        n_resamples, seed: of the bootstrap.
+        confidence: of the CI, in (0, 1).
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    if not scores:
+        return []
+    per_task = _paired_resamples(scores, n_resamples, seed)
+    resampled = sum(r for _, r in per_task.values()) / len(per_task)  # (methods, n_resamples): resampled S of each
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    ranks = []
+    for i in range(len(scores)):
+        low = np.percentile(resampled - resampled[i], tail, axis=1)  # (methods,): the lower CI end of each lead
+        ranks.append(1 + int(np.sum(low > 0.0)))
+    return ranks
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """``B − A`` in gain, episode by episode, with its paired 95 % CI.
+
+    Attributes:
+        mean: the difference of the means (of S over the tasks, or of ``G_t`` on one task).
+        ci_low, ci_high: the paired stratified-bootstrap CI.
+        ahead: episodes (one task) or tasks (the suite) where B's mean gain is the higher.
+        count: episodes (one task) or tasks (the suite) compared.
+    """
+
+    mean: float
+    ci_low: float
+    ci_high: float
+    ahead: int
+    count: int
+
+
+def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_RESAMPLES,
+                      seed: int = DEFAULT_SEED, confidence: float = 0.95
+                      ) -> tuple[PairedDifference, dict[str, PairedDifference]]:
+    """How much B gains over A: ``S_B − S_A`` and, per task, ``G_B − G_A``, with paired CIs.
+
+    The CIs come from the same paired bootstrap that ranks the leaderboard
+    (:func:`separable_ranks`): B is ahead of A beyond doubt exactly when the suite CI is above 0.
+
+    Args:
+        a, b: suite scores of the same tasks and seeds.
+        n_resamples, seed: of the bootstrap.
+        confidence: of the CIs, in (0, 1).
+
+    Returns:
+        ``(suite difference, task → difference)``.
+
+    Raises:
+        ValueError: the scores cover different tasks or seeds, or carry no seeds.
+    """
+    per_task = _paired_resamples([a, b], n_resamples, seed)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    tasks = {}
+    for task, (gains, resampled) in per_task.items():
+        low, high = np.percentile(resampled[1] - resampled[0], [tail, 100.0 - tail])
+        tasks[task] = PairedDifference(float(np.mean(gains[1] - gains[0])), float(low), float(high),
+                                       int(np.sum(gains[1] > gains[0])), int(gains.shape[1]))
+    suite = sum(r for _, r in per_task.values()) / len(per_task)
+    low, high = np.percentile(suite[1] - suite[0], [tail, 100.0 - tail])
+    means = [d.mean for d in tasks.values()]
+    return (PairedDifference(float(np.mean(means)), float(low), float(high), sum(m > 0 for m in means), len(means)),
+            tasks)
+
+
+def performance_profile(gains_by_task: Mapping[str, np.ndarray], taus: Sequence[float]) -> np.ndarray:
+    """Fraction of episodes with gain above each threshold τ (tasks weigh equally).
+
+    ``profile(τ) = mean_t  mean_i [g_{t,i} > τ]`` (rliable's run-score distribution).
+
+    Args:
+        gains_by_task: per task, the ``(n_t,)`` gains.
+        taus: thresholds.
+
+    Returns:
+        ``(len(taus),)`` fractions in [0, 1], non-increasing in τ.
+    """
+    if not gains_by_task:
+        raise ValueError("need at least one task")
+    tau = np.asarray(taus, dtype=np.float64)
+    per_task = [(np.asarray(g, dtype=np.float64)[:, None] > tau[None, :]).mean(axis=0) for g in gains_by_task.values()]
+    return np.mean(per_task, axis=0)
+
+
+def probability_of_improvement(x_by_task: Mapping[str, np.ndarray], y_by_task: Mapping[str, np.ndarray]) -> float:
+    """P(X > Y): the chance that a run of X beats a run of Y on a random task (rliable).
+
+    Per task, the Mann–Whitney statistic ``(1 / n m) Σ_i Σ_j S(x_i, y_j)`` with S = 1 if
+    x > y, ½ if equal, 0 otherwise; averaged over the tasks both cover.
+
+    Args:
+        x_by_task, y_by_task: per task, per-seed scores of X and Y (e.g. gains).
+
+    Raises:
+        ValueError: no task in common.
+    """
+    common = [t for t in x_by_task if t in y_by_task]
+    if not common:
+        raise ValueError("X and Y share no task")
+    probs = []
+    for t in common:
+        x = np.asarray(x_by_task[t], dtype=np.float64)[:, None]
+        y = np.asarray(y_by_task[t], dtype=np.float64)[None, :]
+        probs.append(float(((x > y) + 0.5 * (x == y)).mean()))
+    return float(np.mean(probs))

@@ -1,0 +1,94 @@
+"""``swarmloc compare``: two results files of one suite, paired episode by episode."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import tyro
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from swarmloc.bench.scoring.compare import Comparison
+
+
+@dataclass
+class Options:
+    """Compare two results files of one suite episode by episode (B against A, paired CIs)."""
+
+    a: tyro.conf.Positional[Path]
+    """Results file of the reference (baseline), from `swarmloc evaluate`."""
+    b: tyro.conf.Positional[Path]
+    """Results file compared with it (same suite)."""
+    resamples: int = 2000
+    """Bootstrap resamples of the paired CIs (the leaderboard's default)."""
+    json: Path | None = None
+    """Also write the comparison as JSON to this file."""
+
+
+#: columns of piped output: the widest task ID and the four number columns
+PIPED_WIDTH = 100
+
+
+def _signed(x: float) -> str:
+    return f"{x:+.3f}"
+
+
+def print_comparison(c: Comparison, console: Console) -> None:
+    """The per-task table and the suite line."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    table = Table(title=escape(f"B against A on {c.suite}; B − A: gain over uniform in log2"), title_justify="left")
+    table.add_column("task", no_wrap=True)
+    for col in ("RMSE A [m]", "RMSE B [m]", "B − A [95 % CI]", "B ahead"):
+        table.add_column(escape(col), justify="right", no_wrap=True)
+    for t in c.tasks:
+        d = t.difference
+        style = "green" if d.ci_low > 0 else "red" if d.ci_high < 0 else None
+        table.add_row(t.task.removeprefix("swarmloc/"), f"{t.rmse_a:.3f}", f"{t.rmse_b:.3f}",
+                      f"{_signed(d.mean)} [{_signed(d.ci_low)}, {_signed(d.ci_high)}]", f"{d.ahead}/{d.count}",
+                      style=style)
+    console.print(table)
+    d, (la, ha), (lb, hb) = c.difference, c.score_a.times_ci, c.score_b.times_ci
+    console.print(f"2^S  A {c.score_a.times:.3f} [{la:.3f}, {ha:.3f}]   B {c.score_b.times:.3f} [{lb:.3f}, {hb:.3f}]")
+    console.print(f"S_B − S_A = {_signed(d.mean)} log2 [{_signed(d.ci_low)}, {_signed(d.ci_high)}] (paired 95 % CI); "
+                  f"B ahead on {d.ahead}/{d.count} tasks; P(B > A) = {c.p_improvement:.2f}")
+    verdict = ("B is ahead beyond doubt" if d.ci_low > 0 else "A is ahead beyond doubt" if d.ci_high < 0
+               else "level: the seeds cannot tell them apart")
+    console.print(f"verdict: {verdict}")
+    for task, why in c.left_out:
+        console.print(f"left out: {task} ({why})")
+
+
+def run(opts: Options, console: Console | None = None) -> int:
+    """Print the comparison; 2 when a file is invalid or the two cannot be paired."""
+    import json
+    import sys
+
+    from rich.console import Console
+    from rich.text import Text
+
+    from swarmloc.bench.common.files import write_text_atomic
+    from swarmloc.bench.scoring.compare import compare, comparison_dict
+    from swarmloc.bench.evaluation.results import load_results
+
+    # piped output has no terminal width to fit: lay the table out for the width it needs
+    console = console or (Console() if sys.stdout.isatty() else Console(width=PIPED_WIDTH))
+    if opts.resamples < 1:
+        console.print(Text(f"error: --resamples must be >= 1, got {opts.resamples}", style="bold red"))
+        return 2
+    try:
+        comparison = compare(load_results(opts.a), load_results(opts.b), n_resamples=opts.resamples)
+    except ValueError as err:  # ResultsFileError is one
+        console.print(Text(f"error: {err}", style="bold red"))
+        return 2
+    for label, path, name in (("A", opts.a, comparison.name_a), ("B", opts.b, comparison.name_b)):
+        console.print(Text(f"{label}: {name} ({path})"))
+    print_comparison(comparison, console)
+    if opts.json is not None:
+        write_text_atomic(opts.json, json.dumps(comparison_dict(comparison), indent=1) + "\n")
+        console.print(f"wrote {opts.json}")
+    return 0

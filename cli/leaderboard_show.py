@@ -1,0 +1,65 @@
+"""``swarmloc leaderboard show``: the leaderboard in the terminal."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from swarmloc.leaderboard.store.database import LeaderboardStore
+
+
+@dataclass
+class Options:
+    """Print the leaderboard in the terminal (ranked by the score, 2^S; fits 100 columns)."""
+
+    db_url: str | None = None
+    """Store URL (default: $SWARMLOC_DB, else a SQLite file in the user data directory)."""
+    suite: str | None = None
+    """Only this suite (all suites when omitted)."""
+    family: str | None = None
+    """Show one column per task of this family (e.g. Scale, NLOS, Cascaded) instead of one per family."""
+    tasks: str | None = None
+    """Show one column per listed task, comma-separated IDs (`swarmloc/` and `-v0` may be omitted; at most 6)."""
+    shipped: bool = False
+    """First store the shipped reference results that the store lacks (those of --suite when given), as
+    `swarmloc demo` does: the board of the shipped methods without evaluating anything."""
+
+
+def run(opts: Options, console: Console | None = None) -> int:
+    """Print the tables; 1 when the store cannot be opened, 2 for an unknown family, task or shipped suite."""
+    from rich.console import Console
+    from rich.text import Text
+
+    from swarmloc.leaderboard.site.views import open_store_or_refuse, print_leaderboard
+
+    with open_store_or_refuse(opts.db_url, console) as store:
+        if store is None:
+            return 1
+        if opts.shipped and not _store_shipped(store, opts.suite, console or Console()):
+            return 2
+        try:
+            print_leaderboard(store, opts.suite, console, family=opts.family, tasks=opts.tasks)
+        except ValueError as err:
+            (console or Console()).print(Text(f"error: {err}", style="bold red"))
+            return 2
+    return 0
+
+
+def _store_shipped(store: LeaderboardStore, suite: str | None, console: Console) -> bool:
+    """Store the shipped results that ``store`` lacks (of ``suite``, else of every suite); False for an unknown suite."""
+    from rich.text import Text
+
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
+    from swarmloc.leaderboard.store.shipped import load_shipped
+
+    if suite is not None and suite not in RESULTS_DIRS:
+        console.print(Text(f"error: no shipped results of suite {suite!r}; shipped: {', '.join(RESULTS_DIRS)}",
+                           style="bold red"))
+        return False
+    loaded = load_shipped(store, RESULTS_DIRS[suite] if suite is not None else None)
+    for name, why in loaded.refused:
+        console.print(Text(f"not stored {name}: {why}", style="yellow"))
+    return True

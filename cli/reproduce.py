@@ -1,0 +1,260 @@
+"""``swarmloc reproduce …``: the paper reproductions and calibration reports, one command each.
+
+Each command is a dataclass (its fields are the options, its docstring the help line) whose
+``run`` writes the report, then prints it. The work happens in ``swarmloc.bench.reproduce``,
+imported inside ``run`` so that ``swarmloc --help`` stays light.
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Callable
+
+
+def print_report(write: Callable[[], Path]) -> int:
+    """Write a report, then print it.
+
+    Args:
+        write: writes the report and returns its path.
+
+    Returns:
+        0, or 2 after printing ``error: …`` when an option names something that does not
+        exist or is not allowed (``ValueError``, ``KeyError``, ``FileNotFoundError``).
+    """
+    try:
+        path = write()
+    except (ValueError, KeyError, FileNotFoundError) as err:
+        print(f"error: {err.args[0] if isinstance(err, KeyError) and err.args else err}")
+        return 2
+    print(path.read_text(encoding="utf-8"))
+    return 0
+
+
+@dataclass
+class Madrl:
+    """madrl Experiments 1, 3–7 on our tasks (test seeds), beside the paper's tables."""
+
+    out: Path = Path("madrl.md")
+    """Markdown file to write (a folder: <out>/madrl.md); raw numbers go beside it as .json."""
+    seeds: int = 32
+    """test seeds per task (1_000_000 …; 32 = the standard-v0 / standard-v1 episodes)."""
+    traces: int = 8
+    """seeds per task whose per-step traces give per-channel weights, pre-fault and peak errors."""
+    weights: Path | None = None
+    """MAPPO weights (default: the shipped agents/weights/mappo.pt)."""
+    accuracy_only_weights: Path | None = None
+    """Weights of the reward ablation (default: the shipped mappo_accuracy_only.pt, if present)."""
+    version: int = 1
+    """Benchmark version of the tasks: 1 (`*-v1`, with the learned reference beside mappo) or 0 (the frozen v0)."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.madrl import reproduce_madrl
+
+        return print_report(lambda: reproduce_madrl(self.out, self.seeds, self.traces, self.weights,
+                                                    self.accuracy_only_weights, version=self.version))
+
+
+@dataclass
+class Pfnn:
+    """pf-nn Tables 4 (accuracy) and 5 (time per step) on Indoor, beside the paper's numbers."""
+
+    out: Path = Path("pfnn.md")
+    """Markdown file to write (a folder: <out>/pfnn.md); raw numbers go beside it as .json."""
+    seeds: int = 32
+    """Indoor test seeds (1_000_000 …)."""
+    duration: float | None = None
+    """Episode length [s] (default: the task's 100 s)."""
+    timing_steps: int = 300
+    """Steps of the Table 5 timing episode."""
+    oracle: bool = True
+    """Also run the privileged online-trained PF-NN (shown apart)."""
+    version: int = 1
+    """Benchmark version of the task: 1 (Indoor-v1, pf-nn's v1 fit) or 0 (the frozen Indoor-v0)."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.pfnn import reproduce_pfnn
+
+        return print_report(lambda: reproduce_pfnn(self.out, self.seeds, self.duration, self.timing_steps,
+                                                   self.oracle, version=self.version))
+
+
+@dataclass
+class Immarkf:
+    """imm-arkf Table 2 on HybridNoise{10,30,50} (IMM-ARKF vs IMM-KF vs IMM-EKF), beside the paper's numbers."""
+
+    out: Path = Path("immarkf.md")
+    """Markdown file to write (a folder: <out>/immarkf.md); raw numbers go beside it as .json."""
+    seeds: int = 16
+    """Test seeds per task (1_000_000 …), at least 2."""
+    duration: float | None = None
+    """Episode length [s] (default: the tasks' 60 s)."""
+    version: int = 1
+    """Benchmark version of the tasks: 1 (contamination mixture) or 0 (the frozen v0, eq. 1 as printed)."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.immarkf import reproduce_immarkf
+
+        return print_report(lambda: reproduce_immarkf(self.out, self.seeds, self.duration, self.version))
+
+
+@dataclass
+class Federated:
+    """federated Tables 2–3 on GradualFault (Scheme 1, Scheme 2, the adaptive federated filter)."""
+
+    out: Path = Path("federated.md")
+    """Markdown file to write (a folder: <out>/federated.md); raw numbers go beside it as .json."""
+    seeds: int = 16
+    """Test seeds (1_000_000 …), at least 2."""
+    version: int = 1
+    """Benchmark version of the task: 1 (GradualFault-v1) or 0 (the frozen GradualFault-v0)."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.federated import reproduce_federated
+
+        return print_report(lambda: reproduce_federated(self.out, self.seeds, self.version))
+
+
+@dataclass
+class Dtvirm:
+    """dtvirm Tables 1, 5, 6: MDS-MAP initialization and the CI-EKF on AnchorFree-v0."""
+
+    out: Path = Path("dtvirm.md")
+    """Markdown file to write (a folder: <out>/dtvirm.md); raw numbers go beside it as .json."""
+    seeds: int = 16
+    """AnchorFree-v0 test seeds (1_000_000 …), at least 2."""
+    trials: int = 200
+    """Monte Carlo trials of the Table 1 initializer comparison (the paper: 500)."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.dtvirm import reproduce_dtvirm
+
+        return print_report(lambda: reproduce_dtvirm(self.out, self.seeds, self.trials))
+
+
+@dataclass
+class Real:
+    """The sim-to-real report: every method on real-v1 (UTIL TWR + 8 TDOA flights) and on TDOA-v1."""
+
+    out: Path = Path("real.md")
+    """Markdown file to write (a folder: <out>/real.md); raw numbers beside it as .json, the plot as .png."""
+    workers: int = 2
+    """Worker processes."""
+    seeds: int = 4
+    """Test seeds per task, 1 … 4 (the suite's 4)."""
+    methods: tuple[str, ...] = ()
+    """Methods (default: every registered one)."""
+
+    def run(self) -> int:
+        """Without the data, says where it comes from (exit status 2)."""
+        from swarmloc.bench.reproduce.real import reproduce_real
+
+        return print_report(lambda: reproduce_real(self.out, list(self.methods) or None, workers=self.workers,
+                                                   seeds=self.seeds))
+
+
+@dataclass
+class Labels:
+    """Calibrate the error labels: the oracle at k = 1 … 3 on every standard-v0 task, beside the best
+    shipped method and the information bound."""
+
+    out: Path = Path("docs/reproduce/labels.md")
+    """Markdown file to write (a folder: <out>/labels.md); raw numbers go beside it as .json."""
+    workers: int = 2
+    """Worker processes of the runner (1 … 64)."""
+    seeds: int = 32
+    """Test seeds per task, the first of standard-v0's 32 (2 … 32; the shipped results are compared per seed)."""
+    progress: bool = True
+    """Show the runner's progress bars."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.labels import reproduce_labels
+
+        return print_report(lambda: reproduce_labels(self.out, workers=self.workers, seeds=self.seeds,
+                                                     progress=self.progress))
+
+
+@dataclass
+class Calibration:
+    """Calibrate the v1 tasks: per task the five criteria (ceiling valid, the fault matters, headroom, the paper's
+    phenomenon, nothing degenerate) from the classical methods, the split comparison and the gap closed."""
+
+    suite: str = "standard-v1"
+    """Suite whose tasks are calibrated (see docs/suites.md)."""
+    tasks: str | None = None
+    """Only these tasks of the suite, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
+    seeds: int | None = None
+    """The first this many seeds of each task, at least 2 (default: all of the suite's)."""
+    out_md: Path = Path("docs/calibration.md")
+    """Markdown report to write."""
+    out_json: Path = Path("docs/calibration.json")
+    """The report's numbers, machine-readable."""
+    workers: int = 1
+    """Worker processes of the runner (1 … 64)."""
+    progress: bool = True
+    """Show the runner's progress bar."""
+
+    def command_line(self) -> str:
+        """The command that reproduces the report: ``swarmloc reproduce calibration`` and its non-default options."""
+        words = ["swarmloc", "reproduce", "calibration"]
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name not in ("workers", "progress") and value != f.default:
+                words += [f"--{f.name.replace('_', '-')}", str(value)]
+        return shlex.join(words)
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.calibration import reproduce_calibration
+
+        def write() -> Path:
+            reproduce_calibration(self.suite, self.tasks, self.seeds, self.out_md, self.out_json,
+                                  workers=self.workers, progress=self.progress, command=self.command_line())
+            return self.out_md
+
+        return print_report(write)
+
+
+@dataclass
+class PeerUpdate:
+    """The CEKF's peer update as registered (a known point, madrl §2.3) against covariance intersection, on
+    the standard-v1 tasks with peer channels: oracle ceiling, fault size and gate lock-outs under each."""
+
+    out: Path = Path("peer-update.md")
+    """Markdown file to write (a folder: <out>/peer-update.md); raw numbers go beside it as .json."""
+    seeds: int = 32
+    """Test seeds per task (1_000_000 …), at least 2."""
+    tasks: list[str] = field(default_factory=list)
+    """Task IDs (default: every standard-v1 task with peer channels)."""
+    variants: bool = True
+    """Also measure the spec variants a consistent filter could start from (Scale with anchors ranged
+    within 11 m, HybridNoise without peers); not registered tasks."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.peer_update import reproduce_peer_update
+
+        return print_report(lambda: reproduce_peer_update(self.out, self.seeds, self.tasks or None,
+                                                          variants=self.variants))
+
+
+@dataclass
+class Shipped:
+    """Regenerate the shipped reference results of a suite (bench/results/<suite>/<method>.json)."""
+
+    methods: tuple[str, ...] = ()
+    """Methods to re-evaluate (default: every method with a shipped file of the suite)."""
+    suite: str = "standard-v1"
+    """standard-v1 or standard-v0."""
+    workers: int = 2
+    """Worker processes."""
+
+    def run(self) -> int:
+        from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, regenerate, shipped_results
+
+        if self.suite not in RESULTS_DIRS:
+            print(f"error: suite {self.suite!r} has no shipped results; allowed: {', '.join(RESULTS_DIRS)}")
+            return 2
+        methods = list(self.methods) or [path.stem for path in shipped_results(RESULTS_DIRS[self.suite])]
+        for path in regenerate(methods, self.suite, workers=self.workers):
+            print(f"wrote {path}")
+        return 0

@@ -1,0 +1,1 @@
+"""Gymnasium, vector, PettingZoo and torchrl adapters, registration and rendering."""

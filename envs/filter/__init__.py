@@ -1,0 +1,1 @@
+"""The cooperative EKF backbone and the information bound (numba kernels and numpy references)."""

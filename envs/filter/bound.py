@@ -1,0 +1,322 @@
+"""The information bound: the posterior Cramér–Rao bound of the swarm's positions.
+
+Per episode, along the TRUE trajectory, the bound of Tichavský, Muravchik and Nehorai (1998)
+over the joint 6N state of the swarm, given the measurements that are present and not
+labelled faulty:
+
+    J₀ = P₀⁻¹,   J_k = (Q + F J_{k−1}⁻¹ Fᵀ)⁻¹ + Σ_c H_cᵀ R_c⁻¹ H_c
+
+with F, Q the CEKF's IMU-driven constant-acceleration model (``cekf.predict_uav``: per UAV
+F = [[I, dt·I], [0, I]], Q = σ_imu² G Gᵀ, G = [dt²/2·I; dt·I]), P₀ the filter's initial
+covariance (``cekf.initial_covariance``), H_c each channel's Jacobian at the true positions
+(a peer range ‖p_i − p_j‖ or relative position p_j − p_i has a block for both UAVs) and R_c
+its nominal variance (``ChannelLayout.r0``). No estimator that uses only those measurements
+and the IMU model can have a lower mean-square error than tr[J_k⁻¹] over a UAV's position
+block, whatever it believes about its neighbours (the bound estimates the swarm jointly),
+as long as the ranges are close to linear over the estimation error: see "Scope" below.
+
+Hybrid GPS noise (``specs.HybridNoise``). R_c of a fix is its nominal σ² (``Sensors.gps_sigma``)
+whatever the model, and every fix enters (the heavy-tail excess is not in ``injected``). For
+non-Gaussian additive noise the bound's measurement term is Hᵀ I_v H, I_v the Fisher
+information of the noise density, so R_c⁻¹ ⪰ I_v keeps it a lower bound:
+
+- mixture (v1), σ = σ_g = ``gauss_sigma``: Fisher information is convex in the density and a
+  trivariate t of scale σ_t has I = (ν+3)/((ν+5) σ_t²) I, so
+  I_v ⪯ [(1 − p)/σ_g² + p (ν+3)/((ν+5) σ_t²)] I ⪯ I/σ_g² whenever σ_t ≥ σ_g. The bound then
+  holds, conservatively: it treats every fix as Gaussian with the mixture's core σ_g, while
+  the mixture's actual spread per axis is larger, var = (1 − p) σ_g² + p σ_t² E[ν/(ν − 2)]
+  (infinite for ν ≤ 2). With σ_t < σ_g it may not hold.
+- weighted sum (v0): v = a·t + (1 − a)·g is nearly Gaussian with a spread *below* the nominal
+  σ (std 0.91 / 0.77 / 0.72 m at a = 0.1 / 0.3 / 0.5 against 1 m), so its Fisher information
+  exceeds 1/σ² and on those tasks the bound is not strictly a lower bound.
+
+Fast path. The dynamics are linear, so the recursion is a Kalman covariance recursion with
+the Jacobians at the truth. ``pcrlb`` runs it in covariance form C = J⁻¹ on the blocks
+A = C_pp, B = C_pv, V = C_vv (each 3N × 3N, positions and velocities of all UAVs), which
+exploits the structure:
+- the prediction C⁻ = F C Fᵀ + Q is elementwise on the blocks (F and Q are the same 6×6
+  model for every UAV): O((3N)²), no factorisation;
+- every channel measures positions only, so the measurement information Λ = Σ HᵀR⁻¹H is a
+  3N × 3N matrix assembled by 3×3 blocks (a peer adds to the ii, jj, ij and ji blocks), and
+  the update conditions the positions only (the velocities' regression on the positions
+  is unchanged): two 3N × 3N symmetric positive-definite inverses and three products per
+  step, never a 6N × 6N factorisation (``update_covariance``);
+- the inverses are Cholesky-based block inversions (``spd_inverse``) whose pivots double
+  as the positive-definiteness test: a bound that loses it numerically is reported
+  (``Pcrlb.failed_at``), never returned;
+- episodes with identical inputs (a fixed trajectory, scheduled faults) are computed once.
+
+The kernels are in ``bound_kernel``; ``bound_reference`` is the literal information-form
+transcription (dense 6N × 6N inverses); tests hold the two equal.
+
+Scope: a Cramér–Rao bound along the truth. The measurement term is the Fisher information
+at the one true trajectory an episode replays (the PCRLB's expectation E[Hᵀ R⁻¹ H] over the
+state taken at the truth), so J_k⁻¹ is the covariance of the Kalman filter of the model
+*linearised at the truth*: exact for the linear channels (landmark, GPS, relative position),
+and for a range a floor on (locally) unbiased estimators, a ceiling on every estimator only
+where the range is near-linear over the estimation error. It is not where the ranging
+framework is (near-)planar: a displacement δ of a UAV normal to the plane of its peers
+changes each of its ranges by δ²/(2r), by nothing to first order, so the ranges give the
+bound no out-of-plane information, while an EKF, linearised at its own estimate, draws
+that information from the curvature (a biased estimator, which a CRB does not bound).
+A ``PhasedCircles`` swarm is exactly planar at every instant: z_i = c + a sin(ω_z t + iφ) on
+the circle angle θ_i = ω t + iφ is a linear function of x_i, y_i. Measured on Indoor-v0
+with a 60° camera cone (range 6 m, σ_imu 0.5 m/s², 8–32 seeds from 2 000 000): bound 1.223 m,
+uniform CEKF 0.47 m, a centralised EKF 0.33 m, the same EKF with its ranges linearised at
+the truth 1.21 m (the bound's own model); the gap is all out of plane (position variance
+along z: bound 1.46 m², CEKF 0.19 m²; x and y: about 0.02 m² in both); without peer ranges
+(linear) bound 2.119 m, uniform 2.117 m; with the UAVs 0.26 m rms off their best plane
+(``radius_step`` 1 m, ``z_amplitude`` 2 m) bound 0.509 m, uniform 1.117 m. On the v0 tasks
+the landmarks dominate and it does not show on a task mean (Indoor-v0: bound = centralised
+EKF = truth-linearised EKF = 0.032 m), but a small change does (a 5 m omnidirectional
+camera: uniform 0.147 m, bound 0.186 m): with no first-order information out of plane, even
+weak curvature information wins. A task whose ceiling must hold (calibration's "ceiling
+valid") keeps its ranging framework clearly off a plane. ``test_bound`` pins the planar case
+on a 4-UAV toy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import NamedTuple
+
+import numpy as np
+
+from swarmloc.envs.filter.bound_kernel import pcrlb_kernel
+from swarmloc.envs.world.labels import LABEL_SIGMAS
+from swarmloc.envs.tasks.specs import TaskSpec
+
+#: A channel-step enters the bound unless its own injected systematic error (NLOS bias, GPS
+#: drift: ``SenseBuffers.injected``) exceeds this many nominal σ: the k of the error labels
+#: (``labels.LABEL_SIGMAS``), so the bound leaves out what the error labels call a fault of the
+#: measurement itself. (Labels v1 judge a 3-vector channel by a wider radius and count the
+#: heavy-tail excess of hybrid GPS noise too; no v0 task's GPS error comes near either.)
+BOUND_LABEL_SIGMAS = LABEL_SIGMAS
+#: bump whenever the bound's maths or inputs change (it keys the persistent cache)
+BOUND_VERSION = 1
+
+
+class BoundInputs(NamedTuple):
+    """Everything the recursion needs for B episodes of one task.
+
+    Shapes: T steps (1 … T, the filter's updates), B episodes, N UAVs, L channels per UAV,
+    A anchors, M landmarks.
+
+    Attributes:
+        dt: step length [s].
+        imu_sigma: accelerometer noise σ [m/s²] (Q = σ² G Gᵀ).
+        p0_diag: ``(6,)`` diagonal of one UAV's initial covariance [m², m²/s²] (p then v).
+        kind, target: ``(N, L)`` int64 channel kind and the anchor / UAV / landmark it refers to.
+        r0: ``(N, L)`` nominal variance per scalar row [m²].
+        anchors: ``(A, 3)``; landmarks ``(M, 3)`` [m].
+        pos: ``(T, B, N, 3)`` true positions at steps 1 … T [m].
+        use: ``(T, B, N, L)`` bool: the channel-step enters (present and not labelled faulty).
+    """
+
+    dt: float
+    imu_sigma: float
+    p0_diag: np.ndarray
+    kind: np.ndarray
+    target: np.ndarray
+    r0: np.ndarray
+    anchors: np.ndarray
+    landmarks: np.ndarray
+    pos: np.ndarray
+    use: np.ndarray
+
+
+class Pcrlb(NamedTuple):
+    """The bound of every UAV at every step.
+
+    Attributes:
+        pos_var: ``(T, B, N)`` tr[J_k⁻¹] over each UAV's position block [m²] (NaN after a failure).
+        failed_at: ``(B,)`` first step index (0-based) whose bound is not positive definite
+            numerically; −1 where the recursion ran to the end.
+    """
+
+    pos_var: np.ndarray
+    failed_at: np.ndarray
+
+
+def unsupported_reason(spec: TaskSpec) -> str | None:
+    """Why the bound of ``spec`` is not defined (None: it is).
+
+    Args:
+        spec: the task.
+
+    Returns:
+        None, or a one-line reason: a recorded flight (truth and channel faults come from a
+        log, not from the world the bound replays), a swarm whose absolute position is
+        unobservable (no anchor, landmark or GPS: translation and yaw are a gauge, which the
+        task's alignment removes from its score but not from the bound), or a sensor the
+        bound does not model (visual odometry).
+    """
+    if spec.trajectory.kind == "recorded":
+        return (f"{spec.task_id} replays a recorded flight: the bound is computed on the simulated world "
+                "and is not defined for recorded data")
+    if not (spec.anchors or spec.landmarks or spec.sensors.gps_sigma):
+        return (f"{spec.task_id} has no anchor, landmark or GPS: the swarm's translation and yaw are "
+                "unobservable (a gauge the score removes by alignment), so no finite position bound exists")
+    if spec.scoring.align_first_seconds > 0:
+        return f"{spec.task_id} is scored after an alignment that the bound does not model"
+    if spec.sensors.velocity_sigma is not None:
+        return f"{spec.task_id} has visual odometry, which the bound does not model"
+    return None
+
+
+def bound_labels(valid: np.ndarray, injected: np.ndarray, sigma: np.ndarray,
+                 label_sigmas: float = BOUND_LABEL_SIGMAS) -> np.ndarray:
+    """Channel-steps the bound leaves out: present and with an own systematic error above k·σ.
+
+    The measurement's own error only (``SenseBuffers.injected``: NLOS bias, GPS drift), not
+    the neighbour-estimate part that the world's ``label`` adds to a peer link whose
+    neighbour has an IMU fault: the bound estimates every UAV jointly, so that range is
+    informative whatever the neighbour's filter believes.
+
+    Args:
+        valid: ``(..., N, L)`` measurement present.
+        injected: ``(..., N, L)`` magnitude of the injected error [m].
+        sigma: ``(N, L)`` nominal σ per scalar row [m].
+        label_sigmas: k.
+
+    Returns:
+        ``(..., N, L)`` bool.
+    """
+    return np.asarray(valid, dtype=bool) & (np.asarray(injected) > label_sigmas * np.asarray(sigma))
+
+
+class BoundRecorder:
+    """Collects the bound's inputs step by step from a world's buffers.
+
+    Feed it the world's step buffers once per filter update, in order (steps 1 … T): for
+    ``World.sense`` that is every sensed step; inside a ``LinkTrustCore`` (or
+    ``TrustEnvBatch``), whose world always holds the *pending* step, ``core.world.buffers``
+    after the reset and after each of the first T − 1 steps. A runner that already steps a
+    world (e.g. the uniform reference rollout) thus gets the bound without a second
+    simulation.
+
+    Args:
+        spec: the task; layout, anchors, landmarks: the world's (``world.layout`` …).
+        n_episodes: B.
+        label_sigmas: k of ``bound_labels``.
+    """
+
+    def __init__(self, spec: TaskSpec, layout, anchors: np.ndarray, landmarks: np.ndarray, n_episodes: int,
+                 label_sigmas: float = BOUND_LABEL_SIGMAS):
+        self.spec, self.layout, self.label_sigmas = spec, layout, float(label_sigmas)
+        self.anchors = np.ascontiguousarray(anchors, dtype=float).reshape(-1, 3)
+        self.landmarks = np.ascontiguousarray(landmarks, dtype=float).reshape(-1, 3)
+        n_t, n, n_l = spec.n_steps, spec.n_uav, layout.n_channels
+        self.pos = np.empty((n_t, n_episodes, n, 3))
+        self.use = np.zeros((n_t, n_episodes, n, n_l), dtype=np.bool_)
+        self.steps = 0
+
+    def record(self, pos: np.ndarray, valid: np.ndarray, injected: np.ndarray) -> None:
+        """Record the next step: truth ``(B, N, 3)``, validity and injected error ``(B, N, L)``."""
+        k = self.steps
+        if k >= self.pos.shape[0]:
+            raise ValueError(f"{self.spec.task_id} has {self.pos.shape[0]} steps; step {k + 1} is one too many")
+        self.pos[k] = pos
+        self.use[k] = valid & ~bound_labels(valid, injected, self.layout.sigma, self.label_sigmas)
+        self.steps = k + 1
+
+    def inputs(self) -> BoundInputs:
+        """The recorded episodes as ``BoundInputs`` (every step must have been recorded)."""
+        if self.steps != self.pos.shape[0]:
+            raise ValueError(f"{self.steps} of {self.pos.shape[0]} steps of {self.spec.task_id} recorded")
+        f, lay = self.spec.filter, self.layout
+        return BoundInputs(
+            dt=float(self.spec.dt), imu_sigma=float(self.spec.sensors.imu_sigma),
+            p0_diag=np.array([f.init_pos_sigma**2] * 3 + [f.init_vel_sigma**2] * 3),
+            kind=np.ascontiguousarray(lay.kind), target=np.ascontiguousarray(lay.target),
+            r0=np.ascontiguousarray(lay.r0), anchors=self.anchors, landmarks=self.landmarks, pos=self.pos,
+            use=self.use)
+
+
+def record_inputs(spec: TaskSpec, seeds: np.ndarray | list[int],
+                  label_sigmas: float = BOUND_LABEL_SIGMAS) -> tuple[BoundInputs, object]:
+    """Run B episodes of the world and collect what the bound needs.
+
+    Args:
+        spec: a simulated task.
+        seeds: ``(B,)`` episode seeds.
+        label_sigmas: k of ``bound_labels``.
+
+    Returns:
+        ``(inputs, world)``; the world (after its last step) holds the episodes' fault
+        schedule, which the scoring of some tasks needs.
+    """
+    from swarmloc.envs.world.worlds import make_world
+
+    seeds = np.asarray(seeds, dtype=np.int64)
+    world = make_world(spec, len(seeds))
+    world.reset(seeds)
+    rec = BoundRecorder(spec, world.layout, world.anchors, world.landmarks, len(seeds), label_sigmas)
+    for _ in range(spec.n_steps):
+        buf = world.sense()
+        rec.record(buf.pos, buf.valid, buf.injected)
+    return rec.inputs(), world
+
+
+def distinct_episodes(inputs: BoundInputs) -> tuple[np.ndarray, np.ndarray]:
+    """Episodes whose inputs differ: the bound depends on the truth and the channels used only.
+
+    Tasks with a fixed trajectory and scheduled faults give every seed the same bound; it is
+    computed once.
+
+    Returns:
+        ``(first (E,), which (B,))``: the first episode of each distinct input, and for every
+        episode the index into ``first`` of its twin.
+    """
+    first: list[int] = []
+    seen: dict[bytes, int] = {}
+    which = np.empty(inputs.pos.shape[1], dtype=np.int64)
+    for b in range(inputs.pos.shape[1]):
+        key = hashlib.sha256(np.ascontiguousarray(inputs.pos[:, b]).tobytes()
+                             + np.packbits(inputs.use[:, b]).tobytes()).digest()
+        if key not in seen:
+            seen[key] = len(first)
+            first.append(b)
+        which[b] = seen[key]
+    return np.array(first, dtype=np.int64), which
+
+
+def pcrlb(inputs: BoundInputs) -> Pcrlb:
+    """The bound of every UAV at every step of B episodes (fast path).
+
+    Args:
+        inputs: see ``BoundInputs``.
+
+    Returns:
+        ``Pcrlb`` (pos_var ``(T, B, N)``, failed_at ``(B,)``).
+    """
+    n_t, n_b, n = inputs.pos.shape[:3]
+    pos_var = np.full((n_t, n_b, n), np.nan)
+    failed_at = np.full(n_b, -1, dtype=np.int64)
+    w = inputs._replace(pos=np.ascontiguousarray(inputs.pos, dtype=np.float64),
+                        use=np.ascontiguousarray(inputs.use, dtype=np.bool_),
+                        p0_diag=np.ascontiguousarray(inputs.p0_diag, dtype=np.float64),
+                        dt=float(inputs.dt), imu_sigma=float(inputs.imu_sigma))
+    first, which = distinct_episodes(w)
+    pcrlb_kernel(w, first, pos_var, failed_at)
+    # twins share the bound of the first episode with their inputs
+    pos_var[:] = pos_var[:, first[which]]
+    failed_at[:] = failed_at[first[which]]
+    return Pcrlb(pos_var=pos_var, failed_at=failed_at)
+
+
+def bound_rmse(pos_var: np.ndarray, steps: np.ndarray, nodes: np.ndarray) -> float:
+    """sqrt(mean over the scored steps and UAVs of tr[J_k⁻¹]_pos) of one episode.
+
+    Args:
+        pos_var: ``(T, N)`` one episode's ``Pcrlb.pos_var``.
+        steps: ``(T,)`` bool scored steps; nodes: ``(N,)`` bool scored UAVs.
+
+    Returns:
+        The bound on the episode's RMSE over those steps and UAVs [m] (NaN if the
+        selection is empty or the recursion failed inside it).
+    """
+    sel = np.asarray(pos_var)[np.asarray(steps, bool)][:, np.asarray(nodes, bool)]
+    if sel.size == 0:
+        return float("nan")
+    return float(np.sqrt(np.mean(sel)))

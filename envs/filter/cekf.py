@@ -1,0 +1,524 @@
+"""The CEKF backbone as fused numba kernels (``prange`` over the batch).
+
+One 6-state EKF per UAV, state x = [p, v] (world ENU), covariance P.
+
+Prediction (constant acceleration over dt, IMU reading u):
+    x⁻ = F x + G u,  P⁻ = F P Fᵀ + Q,  F = [[I, dt·I], [0, I]],  G = [dt²/2·I; dt·I],
+    Q = σ_imu² G Gᵀ.
+
+Update (madrl §2.3): one joint update over the channels whose trust α > α_th, each with
+R_j = R0_j / max(α_j, α_min); Jacobians at the prior; peer channels use the neighbour's
+broadcast prior position as a known point (``peer_update = "point"``, every registered task).
+A TDOA channel of anchor pair (i, j) is one scalar row h = ‖p − a_j‖ − ‖p − a_i‖ with
+H = u_j − u_i on the position block (u_k the unit vector from anchor k to the prior position).
+
+``peer_update = "ci"`` (a spec option, ``FilterSettings.peer_update``): the absolute channels
+first, as one joint update; then each peer channel in channel order, by covariance
+intersection (Julier and Uhlmann 1997) over the UAV's estimate and the neighbour's broadcast
+one, whose error correlation the UAV cannot know. The joint prior of (x_i, p_j) is bounded
+by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = hᵀ on p_i, −hᵀ on p_j)
+    S = hᵀP_i h/ω + hᵀP_j h/(1 − ω) + r,   K = (P_i/ω) Hᵀ / S,   P_i⁺ = P_i/ω − K H P_i/ω,
+i.e. the point update with R = ω r + ω hᵀP_j h/(1 − ω) followed by P ← P/ω. A relative
+position (z = p_j − p_i) is one 3-row block of the same form with S = A/ω + B/(1 − ω) + r I
+(A, B the two position covariances). ω minimises the trace of P_i⁺'s position block on a grid
+of ``CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
+neighbour's prior at this step (the broadcast one), read before any UAV updates.
+
+The kernel processes the joint update as a sequence of scalar rows, all linearised at the
+prior x⁻: for rows z_r = h_r(x⁻) + H_r (x − x⁻) + v_r with diagonal R, sequential linear
+updates equal the joint update exactly (up to rounding), so no m×m inverse is needed. The
+scalar covariance update P ← P − c cᵀ / s (c = P Hᵀ, s = H c + r) is the Joseph form
+(I − kH) P (I − kH)ᵀ + k r kᵀ simplified for a scalar row; it is evaluated on the upper
+triangle and mirrored, so P stays exactly symmetric, and stays positive definite since
+s ≥ r ≥ R0 > 0. ``cekf_reference`` holds the readable dense float64 version of the same
+maths; tests hold the two equal.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
+from swarmloc.envs.world.cost import CI_RANGE_FLOPS, CI_REL_FLOPS, PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
+
+_MIN_RANGE = 1e-9
+#: the covariance intersection's weight ω is searched on {1/CI_GRID, …, (CI_GRID − 1)/CI_GRID} and 1
+CI_GRID = 50
+#: ``FilterSettings.peer_update`` as the kernels' integer code
+PEER_UPDATE_CODES = {"point": 0, "ci": 1}
+
+
+@njit(cache=True, inline="always")
+def predict_uav(x, P, u, dt, q):
+    """In-place prediction of one UAV: x⁻ = F x + G u, P⁻ = F P Fᵀ + Q (Q = q·G Gᵀ)."""
+    h2 = 0.5 * dt * dt
+    for d in range(3):
+        # p⁻ = p + dt·v + dt²/2·u ;  v⁻ = v + dt·u
+        x[d] = x[d] + dt * x[3 + d] + h2 * u[d]
+        x[3 + d] = x[3 + d] + dt * u[d]
+    # F P Fᵀ with F = [[I, dt I], [0, I]] on blocks A = P_pp, B = P_pv, C = P_vv:
+    #   A⁻ = A + dt (B + Bᵀ) + dt² C,  B⁻ = B + dt C,  C⁻ = C
+    for r in range(3):
+        for c in range(3):
+            P[r, c] = P[r, c] + dt * (P[r, 3 + c] + P[3 + r, c]) + dt * dt * P[3 + r, 3 + c]
+    for r in range(3):
+        for c in range(3):
+            P[r, 3 + c] = P[r, 3 + c] + dt * P[3 + r, 3 + c]
+            P[3 + c, r] = P[r, 3 + c]
+    # Q = σ² G Gᵀ: q·dt⁴/4 on p-p, q·dt³/2 on p-v, q·dt² on v-v (diagonal blocks)
+    for d in range(3):
+        P[d, d] += q * h2 * h2
+        P[d, 3 + d] += q * h2 * dt
+        P[3 + d, d] += q * h2 * dt
+        P[3 + d, 3 + d] += q * dt * dt
+
+
+@njit(cache=True, inline="always")
+def _scalar_update(x, P, hvec, col, y, r, c):
+    """One scalar row: H = hvec on the position block (or e_col if col >= 0)."""
+    # c = P Hᵀ
+    if col >= 0:
+        for a in range(6):
+            c[a] = P[a, col]
+        s = c[col] + r  # s = H P Hᵀ + r
+    else:
+        for a in range(6):
+            c[a] = P[a, 0] * hvec[0] + P[a, 1] * hvec[1] + P[a, 2] * hvec[2]
+        s = c[0] * hvec[0] + c[1] * hvec[1] + c[2] * hvec[2] + r
+    # x ← x + k y, k = c / s
+    g = y / s
+    for a in range(6):
+        x[a] += c[a] * g
+    # P ← P − c cᵀ / s (upper triangle, mirrored: exact symmetry)
+    inv_s = 1.0 / s
+    for a in range(6):
+        for b2 in range(a, 6):
+            v = P[a, b2] - c[a] * c[b2] * inv_s
+            P[a, b2] = v
+            P[b2, a] = v
+
+
+@njit(cache=True, inline="always")
+def _scale_cov(P, inv_w):
+    """P ← P / ω."""
+    for a in range(6):
+        for b2 in range(6):
+            P[a, b2] *= inv_w
+
+
+@njit(cache=True, inline="always")
+def _ci_range_row(x, P, hvec, Pj, y, r, c):
+    """One peer range by covariance intersection (module docstring). Returns ω (1: no update)."""
+    a = 0.0  # hᵀ P_i h
+    b = 0.0  # hᵀ P_j h
+    cc = 0.0  # ‖(P_i h)_pos‖²
+    for u in range(3):
+        cu = 0.0
+        for v in range(3):
+            a += hvec[u] * P[u, v] * hvec[v]
+            b += hvec[u] * Pj[u, v] * hvec[v]
+            cu += P[u, v] * hvec[v]
+        cc += cu * cu
+    tr = P[0, 0] + P[1, 1] + P[2, 2]
+    # tr of P⁺'s position block: (tr − ‖(P h)_pos‖² / (ω S)) / ω; ω = 1 is no update (tr)
+    best, best_w = tr, 1.0
+    for k in range(1, CI_GRID):
+        w = k / CI_GRID
+        f = (tr - cc / (a + w * r + w * b / (1.0 - w))) / w
+        if f < best:
+            best, best_w = f, w
+    if best_w < 1.0:
+        _scalar_update(x, P, hvec, -1, y, best_w * r + best_w * b / (1.0 - best_w), c)
+        _scale_cov(P, 1.0 / best_w)
+    return best_w
+
+
+@njit(cache=True, inline="always")
+def _inv3(S, out):
+    """out = S⁻¹ of a symmetric positive definite 3×3 (adjugate over determinant)."""
+    out[0, 0] = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
+    out[0, 1] = S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]
+    out[0, 2] = S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]
+    out[1, 0] = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
+    out[1, 1] = S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]
+    out[1, 2] = S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]
+    out[2, 0] = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
+    out[2, 1] = S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]
+    out[2, 2] = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    det = S[0, 0] * out[0, 0] + S[0, 1] * out[1, 0] + S[0, 2] * out[2, 0]
+    for u in range(3):
+        for v in range(3):
+            out[u, v] /= det
+
+
+@njit(cache=True, inline="always")
+def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
+    """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω.
+
+    S, Si: scratch 3×3; K: scratch 6×3; top: scratch 3×6.
+    """
+    tr = P[0, 0] + P[1, 1] + P[2, 2]
+    best, best_w = tr, 1.0
+    for k in range(1, CI_GRID):
+        w = k / CI_GRID
+        for u in range(3):
+            for v in range(3):
+                S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
+        _inv3(S, Si)
+        # tr(A S⁻¹ A) with A = P_pp (symmetric)
+        t = 0.0
+        for u in range(3):
+            for v in range(3):
+                av = 0.0
+                for q in range(3):
+                    av += Si[u, q] * P[q, v]
+                t += P[v, u] * av
+        f = tr / w - t / (w * w)
+        if f < best:
+            best, best_w = f, w
+    if best_w >= 1.0:
+        return 1.0
+    w = best_w
+    for u in range(3):
+        for v in range(3):
+            S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
+    _inv3(S, Si)
+    _scale_cov(P, 1.0 / w)
+    # K = P[:, :3] S⁻¹ (on the scaled P), y = m − p
+    for a in range(6):
+        for v in range(3):
+            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
+    y0, y1, y2 = m[0] - x[0], m[1] - x[1], m[2] - x[2]
+    for a in range(6):
+        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
+    # P ← P − K P[:3, :] (upper triangle, mirrored; P[:3, :] read from a copy)
+    for u in range(3):
+        for v in range(6):
+            top[u, v] = P[u, v]
+    for a in range(6):
+        for b2 in range(a, 6):
+            v = P[a, b2] - (K[a, 0] * top[0, b2] + K[a, 1] * top[1, b2] + K[a, 2] * top[2, b2])
+            P[a, b2] = v
+            P[b2, a] = v
+    return w
+
+
+@njit(cache=True, inline="always")
+def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos, prior_pp, peer_update,
+               alpha_th, alpha_min, active, x0, hvec, c):
+    """Trust-weighted joint update of one UAV over its L channels (in place).
+
+    Args:
+        x, P: the UAV's prior (updated in place to the posterior).
+        z: ``(L, 3)`` measurements; valid, alpha: ``(L,)``.
+        kind, target, r0: ``(L,)`` static channel description.
+        anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        prior_pp: ``(N, 3, 3)`` the broadcast priors' position covariances (read by ``"ci"``).
+        peer_update: ``PEER_UPDATE_CODES`` of ``FilterSettings.peer_update``.
+        active: ``(L,)`` output, whether the channel was used.
+        x0, hvec, c: scratch 6-, 3-, 6-vectors.
+
+    Returns:
+        FLOPs of the step for this UAV (prediction + the rows applied, see ``cost.py``).
+    """
+    flops = PREDICT_FLOPS
+    for a in range(6):
+        x0[a] = x[a]
+    for l in range(kind.shape[0]):
+        al = alpha[l]
+        use = valid[l] and al > alpha_th
+        active[l] = False
+        if not use:
+            continue
+        # R = R0 / max(α, α_min)
+        r = r0[l] / max(al, alpha_min)
+        ch = kind[l]
+        j = target[l]
+        if peer_update == 1 and (ch == PEER or ch == PEER_REL):
+            continue  # "ci": the peer channels after the absolute ones (_ci_peers)
+        if ch == ANCHOR or ch == PEER:
+            if ch == ANCHOR:
+                q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
+            else:
+                q0, q1, q2 = prior_pos[j, 0], prior_pos[j, 1], prior_pos[j, 2]
+            d0, d1, d2 = x0[0] - q0, x0[1] - q1, x0[2] - q2
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if rng < _MIN_RANGE:
+                continue
+            # H = (p⁻ − q)ᵀ / ‖p⁻ − q‖ at the prior
+            hvec[0], hvec[1], hvec[2] = d0 / rng, d1 / rng, d2 / rng
+            # y = z − h(x⁻) − H (x − x⁻)
+            y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
+            # H enters as +hvec; _scalar_update uses hvec when col < 0
+            _scalar_update(x, P, hvec, -1, y, r, c)
+            flops += RANGE_ROW_FLOPS
+        elif ch == TDOA:
+            # the pair (i, j) of target code j = i·A + j': h = ‖p − a_j'‖ − ‖p − a_i‖
+            n_a = anchors.shape[0]
+            ia, ib = j // n_a, j % n_a
+            e0, e1, e2 = x0[0] - anchors[ib, 0], x0[1] - anchors[ib, 1], x0[2] - anchors[ib, 2]
+            f0, f1, f2 = x0[0] - anchors[ia, 0], x0[1] - anchors[ia, 1], x0[2] - anchors[ia, 2]
+            rb = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            ra = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+            if rb < _MIN_RANGE or ra < _MIN_RANGE:
+                continue
+            # H = (p⁻ − a_j)ᵀ/‖p⁻ − a_j‖ − (p⁻ − a_i)ᵀ/‖p⁻ − a_i‖ at the prior
+            hvec[0], hvec[1], hvec[2] = e0 / rb - f0 / ra, e1 / rb - f1 / ra, e2 / rb - f2 / ra
+            # y = z − h(x⁻) − H (x − x⁻)
+            y = z[l, 0] - (rb - ra) - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1])
+                                       + hvec[2] * (x[2] - x0[2]))
+            _scalar_update(x, P, hvec, -1, y, r, c)
+            flops += TDOA_ROW_FLOPS
+        else:
+            for d in range(3):
+                if ch == GPS:
+                    # z = p + v, H = e_d: y = z_d − p_d
+                    y = z[l, d] - x[d]
+                    _scalar_update(x, P, hvec, d, y, r, c)
+                else:
+                    # landmark: z = m − p; peer_rel: z = p̂_j − p; H = −e_d: y = z_d − q_d + p_d
+                    qd = landmarks[j, d] if ch == LANDMARK else prior_pos[j, d]
+                    y = -(z[l, d] - qd + x[d])  # sign folded: update along +e_d with −y
+                    _scalar_update(x, P, hvec, d, y, r, c)
+                flops += VECTOR_ROW_FLOPS
+        active[l] = True
+    if peer_update == 1:
+        flops += _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active,
+                           x0, hvec, c)
+    return flops
+
+
+@njit(cache=True)
+def _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active, x0, hvec, c):
+    """The peer channels of one UAV by covariance intersection, in channel order (after its absolute
+    channels; the arguments as ``update_uav``'s). Returns their FLOPs."""
+    flops = 0
+    S, Si, K, top = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((3, 6))
+    for l in range(kind.shape[0]):
+        ch = kind[l]
+        if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):
+            continue
+        r = r0[l] / max(alpha[l], alpha_min)
+        j = target[l]
+        if ch == PEER_REL:
+            for d in range(3):
+                hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
+            _ci_rel_block(x, P, prior_pp[j], hvec, r, S, Si, K, top)
+            flops += CI_REL_FLOPS
+        else:
+            d0, d1, d2 = x0[0] - prior_pos[j, 0], x0[1] - prior_pos[j, 1], x0[2] - prior_pos[j, 2]
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if rng < _MIN_RANGE:
+                continue
+            # at the prior, as every row: H = (p⁻ − p̂_j)ᵀ/‖p⁻ − p̂_j‖, y = z − h(x⁻) − H (x − x⁻)
+            hvec[0], hvec[1], hvec[2] = d0 / rng, d1 / rng, d2 / rng
+            y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
+            _ci_range_row(x, P, hvec, prior_pp[j], y, r, c)
+            flops += RANGE_ROW_FLOPS + CI_RANGE_FLOPS
+        active[l] = True
+    return flops
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
+    """Predict every UAV of every episode; copy the prior positions to ``prior_pos``."""
+    n_b, n = x.shape[0], x.shape[1]
+    q = imu_sigma * imu_sigma
+    for b in prange(n_b):
+        for i in range(n):
+            predict_uav(x[b, i], P[b, i], imu[b, i], dt, q)
+            for d in range(3):
+                prior_pos[b, i, d] = x[b, i, d]
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
+                alpha_th, alpha_min, active, flops, peer_update=0):
+    """Trust-weighted joint update of every UAV of every episode (in place).
+
+    Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
+    ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output;
+    P holds the priors on entry (``"ci"`` reads the neighbours' before any UAV updates).
+    """
+    n_b, n = x.shape[0], x.shape[1]
+    for b in prange(n_b):
+        x0 = np.empty(6)
+        hvec = np.empty(3)
+        c = np.empty(6)
+        prior_pp = np.empty((n, 3, 3))
+        if peer_update == 1:
+            for i in range(n):
+                prior_pp[i] = P[b, i, :3, :3]
+        for i in range(n):
+            flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
+                                    r0[i], anchors, landmarks, prior_pos[b], prior_pp, peer_update, alpha_th,
+                                    alpha_min,
+                                    active[b, i], x0, hvec, c)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
+             alpha_th, alpha_min, est, peer_update=0):
+    """Filter whole sequences: T predict+update steps per episode in one call.
+
+    Shapes: imu ``(T, B, N, 3)``, z ``(T, B, N, L, 3)``, valid/alpha ``(T, B, N, L)``,
+    est ``(T, B, N, 3)`` output posterior positions. Used for offline evaluation and the
+    speed benchmark (no per-step Python dispatch).
+    """
+    n_t, n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2], z.shape[3]
+    q = imu_sigma * imu_sigma
+    for b in prange(n_b):
+        x0 = np.empty(6)
+        hvec = np.empty(3)
+        c = np.empty(6)
+        prior = np.empty((n, 3))
+        prior_pp = np.empty((n, 3, 3))
+        active = np.empty(n_l, dtype=np.bool_)
+        for t in range(n_t):
+            for i in range(n):
+                predict_uav(x[b, i], P[b, i], imu[t, b, i], dt, q)
+                for d in range(3):
+                    prior[i, d] = x[b, i, d]
+                if peer_update == 1:
+                    prior_pp[i] = P[b, i, :3, :3]
+            for i in range(n):
+                update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
+                           r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0,
+                           hvec, c)
+                for d in range(3):
+                    est[t, b, i, d] = x[b, i, d]
+
+
+@njit(cache=True, inline="always")
+def features_uav(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, prior_cov, peer_cov,
+                 resid, pred, nis, yv, S):
+    """Innovation features of one UAV's L channels at its prior (see ``channel_features``).
+
+    Args:
+        x, P: the UAV's prior mean ``(6,)`` and covariance ``(6, 6)``.
+        z: ``(L, 3)`` measurements; valid ``(L,)``; kind, target, r0 ``(L,)``.
+        anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
+        prior_cov: ``(N, 6, 6)`` the UAVs' prior covariances (the broadcast P_j; read only
+            when ``peer_cov``).
+        peer_cov: add the neighbour's broadcast covariance to a peer channel's S (v1 tasks,
+            ``TaskSpec.peer_nis_neighbour_cov``); False keeps the v0 NIS bit for bit.
+        resid, pred, nis: ``(L,)`` outputs.
+        yv, S: scratch 3-vector and 3×3 matrix.
+    """
+    for l in range(kind.shape[0]):
+        if not valid[l]:
+            resid[l] = 0.0
+            pred[l] = 0.0
+            nis[l] = 0.0
+            continue
+        ch = kind[l]
+        j = target[l]
+        if ch == ANCHOR or ch == PEER:
+            if ch == ANCHOR:
+                q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
+            else:
+                q0, q1, q2 = prior_pos[j, 0], prior_pos[j, 1], prior_pos[j, 2]
+            d0, d1, d2 = x[0] - q0, x[1] - q1, x[2] - q2
+            rng = max(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), _MIN_RANGE)
+            h0, h1, h2 = d0 / rng, d1 / rng, d2 / rng
+            y = z[l, 0] - rng
+            # S = h P_pp hᵀ + R0
+            s = (h0 * (P[0, 0] * h0 + P[0, 1] * h1 + P[0, 2] * h2)
+                 + h1 * (P[1, 0] * h0 + P[1, 1] * h1 + P[1, 2] * h2)
+                 + h2 * (P[2, 0] * h0 + P[2, 1] * h1 + P[2, 2] * h2) + r0[l])
+            if peer_cov and ch == PEER:
+                # v1: S += u P_j uᵀ, the neighbour's broadcast prior p̂_j is uncertain too (∂h/∂p_j = −u;
+                # the CEKF keeps no cross-covariance of i and j, so none is added)
+                Pj = prior_cov[j]
+                s += (h0 * (Pj[0, 0] * h0 + Pj[0, 1] * h1 + Pj[0, 2] * h2)
+                      + h1 * (Pj[1, 0] * h0 + Pj[1, 1] * h1 + Pj[1, 2] * h2)
+                      + h2 * (Pj[2, 0] * h0 + Pj[2, 1] * h1 + Pj[2, 2] * h2))
+            resid[l] = abs(y)
+            pred[l] = rng
+            nis[l] = y * y / s
+        elif ch == TDOA:
+            n_a = anchors.shape[0]
+            ia, ib = j // n_a, j % n_a
+            e0, e1, e2 = x[0] - anchors[ib, 0], x[1] - anchors[ib, 1], x[2] - anchors[ib, 2]
+            f0, f1, f2 = x[0] - anchors[ia, 0], x[1] - anchors[ia, 1], x[2] - anchors[ia, 2]
+            rb = max(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), _MIN_RANGE)
+            ra = max(math.sqrt(f0 * f0 + f1 * f1 + f2 * f2), _MIN_RANGE)
+            # h = ‖p⁻ − a_j‖ − ‖p⁻ − a_i‖, H = u_j − u_i on the position block
+            h0, h1, h2 = e0 / rb - f0 / ra, e1 / rb - f1 / ra, e2 / rb - f2 / ra
+            y = z[l, 0] - (rb - ra)
+            # S = H P_pp Hᵀ + R0
+            s = (h0 * (P[0, 0] * h0 + P[0, 1] * h1 + P[0, 2] * h2)
+                 + h1 * (P[1, 0] * h0 + P[1, 1] * h1 + P[1, 2] * h2)
+                 + h2 * (P[2, 0] * h0 + P[2, 1] * h1 + P[2, 2] * h2) + r0[l])
+            resid[l] = abs(y)
+            pred[l] = abs(rb - ra)
+            nis[l] = y * y / s
+        else:
+            # 3-vector channel: S = P_pp + R0·I (H = ±I on position)
+            dist2 = 0.0
+            for d in range(3):
+                if ch == GPS:
+                    yv[d] = z[l, d] - x[d]
+                else:
+                    qd = landmarks[j, d] if ch == LANDMARK else prior_pos[j, d]
+                    hd = qd - x[d]
+                    dist2 += hd * hd
+                    yv[d] = z[l, d] - hd
+            for r_ in range(3):
+                for c_ in range(3):
+                    S[r_, c_] = P[r_, c_] + (r0[l] if r_ == c_ else 0.0)
+            if peer_cov and ch == PEER_REL:
+                # v1: S += P_j,pp for a relative position to the neighbour's broadcast prior
+                for r_ in range(3):
+                    for c_ in range(3):
+                        S[r_, c_] += prior_cov[j, r_, c_]
+            nis[l] = _quad_inv3(S, yv)
+            resid[l] = math.sqrt(yv[0] * yv[0] + yv[1] * yv[1] + yv[2] * yv[2])
+            pred[l] = math.sqrt(dist2) if ch != GPS else 0.0
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def channel_features(x, P, z, valid, kind, target, r0, anchors, landmarks, prior_pos, peer_cov,
+                     resid, pred, nis):
+    """Per-channel innovation features at the prior (before the policy picks trust).
+
+    Outputs ``(B, N, L)``: resid = ‖y‖ (innovation magnitude), pred = predicted distance
+    ‖h(x⁻)‖ to the channel's target (0 for GPS; the predicted range difference's magnitude
+    for TDOA), nis = yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0; with ``peer_cov`` (v1 tasks) a peer
+    channel's S also holds the neighbour's broadcast covariance: + u P_j⁻ uᵀ for a range,
+    + P_j,pp⁻ for a relative position (P holds every UAV's prior, so P[b, j] is P_j⁻).
+    Invalid channels get zeros.
+    """
+    n_b, n = z.shape[0], z.shape[1]
+    for b in prange(n_b):
+        yv = np.empty(3)
+        S = np.empty((3, 3))
+        for i in range(n):
+            features_uav(x[b, i], P[b, i], z[b, i], valid[b, i], kind[i], target[i], r0[i], anchors, landmarks,
+                         prior_pos[b], P[b], peer_cov, resid[b, i], pred[b, i], nis[b, i], yv, S)
+
+
+@njit(cache=True, inline="always")
+def _quad_inv3(S, y):
+    """yᵀ S⁻¹ y for a symmetric positive-definite 3×3 S (Cholesky)."""
+    l00 = math.sqrt(S[0, 0])
+    l10 = S[1, 0] / l00
+    l20 = S[2, 0] / l00
+    l11 = math.sqrt(S[1, 1] - l10 * l10)
+    l21 = (S[2, 1] - l20 * l10) / l11
+    l22 = math.sqrt(S[2, 2] - l20 * l20 - l21 * l21)
+    # forward substitution L w = y; yᵀ S⁻¹ y = ‖w‖²
+    w0 = y[0] / l00
+    w1 = (y[1] - l10 * w0) / l11
+    w2 = (y[2] - l20 * w0 - l21 * w1) / l22
+    return w0 * w0 + w1 * w1 + w2 * w2
+
+
+def initial_covariance(batch: int, n_uav: int, pos_sigma: float, vel_sigma: float) -> np.ndarray:
+    """Diagonal initial covariance ``(B, N, 6, 6)`` from the stated initial uncertainty."""
+    diag = np.array([pos_sigma**2] * 3 + [vel_sigma**2] * 3)
+    return np.broadcast_to(np.diag(diag), (batch, n_uav, 6, 6)).copy()
+

@@ -1,0 +1,70 @@
+"""Per-channel observation of the link-trust track (docs/world.md, "What a Track A policy observes").
+
+Each channel gets F = 11 features, each in [0, 1]: innovation magnitude r, predicted
+distance d̂, previous applied trust, IMU jerk ‖u(k) − u(k−1)‖, normalised innovation
+squared, a one-hot of the channel kind (anchor, peer, landmark, gps, peer_rel) and the
+valid mask. A TDOA channel (range difference of an anchor pair) sets the anchor column
+of the one-hot (``channels.OBS_KIND_COLUMN``), its d̂ is the predicted range difference
+|‖p⁻ − a_j‖ − ‖p⁻ − a_i‖|, and r and the NIS are those of the scalar row, as for a range. Unbounded magnitudes are squashed with x / (x + s), a monotone map of
+[0, ∞) onto [0, 1) whose scale s (below) sits at 0.5; ``unsquash`` inverts it.
+
+The NIS is yᵀ S⁻¹ y with S = H P⁻ Hᵀ + R0 (P⁻ the UAV's prior covariance). v1 tasks: the
+peer NIS includes the neighbour's broadcast covariance, S = u P_i⁻ uᵀ + u P_j⁻ uᵀ + R0 for a
+peer range and P_i⁻ + P_j⁻ + R0 I for a relative position (``TaskSpec.peer_nis_neighbour_cov``,
+``cekf.channel_features``); v0 tasks keep the v0 NIS bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmloc.envs.tasks.channels import N_KINDS, OBS_KIND_COLUMN
+from swarmloc.envs.world.core import CoreStep
+
+FEATURE_NAMES = (
+    "innovation", "predicted_distance", "previous_trust", "imu_jerk", "nis",
+    "kind_anchor", "kind_peer", "kind_landmark", "kind_gps", "kind_peer_rel", "valid",
+)
+N_FEATURES = len(FEATURE_NAMES)
+#: squash scales: innovation [m], predicted distance [m], jerk [m/s²], NIS [-]
+SCALE_INNOVATION, SCALE_DISTANCE, SCALE_JERK, SCALE_NIS = 1.0, 10.0, 1.0, 5.0
+INNOVATION, DISTANCE, PREV_TRUST, JERK, NIS, KIND0, VALID = 0, 1, 2, 3, 4, 5, 10
+
+
+def squash(x: np.ndarray, scale: float) -> np.ndarray:
+    """Map [0, ∞) onto [0, 1): x / (x + scale)."""
+    return x / (x + scale)
+
+
+def unsquash(y: np.ndarray, scale: float) -> np.ndarray:
+    """Inverse of ``squash`` for y in [0, 1)."""
+    return scale * y / np.maximum(1.0 - y, 1e-12)
+
+
+def kind_one_hot(kind: np.ndarray) -> np.ndarray:
+    """``(N, L)`` kind ids → ``(N, L, N_KINDS)`` float32 one-hot (TDOA in the anchor column)."""
+    return np.eye(N_KINDS, dtype=np.float32)[OBS_KIND_COLUMN[kind]]
+
+
+def build_observation(step: CoreStep, one_hot: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Observation ``(B, N, L, F)`` float32 in [0, 1] from a core step.
+
+    Args:
+        step: the core's latest ``CoreStep``.
+        one_hot: ``(N, L, N_KINDS)`` from ``kind_one_hot(layout.kind)``.
+        out: optional preallocated output.
+    """
+    n_b, n, n_l = step.resid.shape
+    if out is None:
+        out = np.empty((n_b, n, n_l, N_FEATURES), dtype=np.float32)
+    valid = step.valid
+    out[..., INNOVATION] = squash(step.resid, SCALE_INNOVATION)
+    out[..., DISTANCE] = squash(step.pred, SCALE_DISTANCE)
+    out[..., PREV_TRUST] = step.applied
+    out[..., JERK] = squash(step.jerk, SCALE_JERK)[..., None]
+    out[..., NIS] = squash(step.nis, SCALE_NIS)
+    out[..., KIND0:KIND0 + N_KINDS] = one_hot
+    out[..., VALID] = valid
+    # absent measurements carry no innovation information
+    out[..., [INNOVATION, DISTANCE, NIS]] *= valid[..., None]
+    return out

@@ -1,0 +1,1 @@
+"""Showing the board: ranking, terminal views, the static HTML site and its plots."""

@@ -1,0 +1,422 @@
+"""The static HTML leaderboard site: ``render_html(store, out_dir)``.
+
+Self-contained: vanilla JS and CSS from ``swarmloc.leaderboard/static`` are copied next to
+the pages, a Content-Security-Policy forbids anything but the site's own files, and every
+submitted string goes through ``html.escape``.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import shutil
+import warnings
+from collections.abc import Iterable, Sequence
+from datetime import datetime, timezone
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING
+from urllib.parse import quote
+
+from swarmloc.bench.evaluation.results import METRIC_NAMES
+from swarmloc.leaderboard.site.ranking import (
+    Column,
+    Standing,
+    SuiteBoard,
+    best_ranked_on,
+    column_score,
+    family_columns,
+    fmt,
+    fmt_pct,
+    fmt_score,
+    fmt_times,
+    status,
+    suite_boards,
+)
+from swarmloc.leaderboard.store.database import LeaderboardEntry, LeaderboardStore
+
+if TYPE_CHECKING:
+    from swarmloc.leaderboard.site.plots import SitePlot
+
+_STATIC_FILES = ("leaderboard.css", "leaderboard.js")
+_PLOT_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg", ".webp")
+_CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
+    "base-uri 'none'; form-action 'none'"
+)
+
+
+def _e(value: object) -> str:
+    """HTML-escape any value (quotes included, so it is safe in attributes)."""
+    return html.escape(str(value), quote=True)
+
+
+def _page(title: str, body: str, root: str) -> str:
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<meta http-equiv=\"Content-Security-Policy\" content=\"{_CSP}\">\n"
+        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+        "<meta name=\"referrer\" content=\"no-referrer\">\n"
+        f"<title>{_e(title)}</title>\n"
+        f"<link rel=\"stylesheet\" href=\"{root}static/leaderboard.css\">\n"
+        f"<script src=\"{root}static/leaderboard.js\" defer></script>\n"
+        f"</head>\n<body>\n{body}\n</body>\n</html>\n"
+    )
+
+
+def _num_cell(value: float | None, text: str, title: str | None = None) -> str:
+    data = "" if value is None else repr(float(value))
+    tip = "" if title is None else f" title=\"{_e(title)}\""
+    return f"<td class=\"num\" data-value=\"{data}\"{tip}>{_e(text)}</td>"
+
+
+def _column_cell(standing: Standing, column: Column) -> str:
+    """A family (or task) cell: 2^G over its covered tasks; the worst task on hover."""
+    cs = column_score(standing.score, column)
+    if cs is None:
+        return _num_cell(None, "—", f"{column.title}: not covered")
+    tip = f"worst task: {cs.worst_task} ({fmt_times(cs.worst_times)}× uniform)"
+    if cs.covered < cs.total:
+        tip += f"; {cs.covered} of {cs.total} tasks covered"
+    return _num_cell(cs.times, fmt_times(cs.times) + ("" if cs.covered == cs.total else "*"), tip)
+
+
+def _score_tip(board: SuiteBoard, standing: Standing) -> str | None:
+    """Hover text of a 2^S cell; for partial coverage, how the best ranked method does on the same tasks."""
+    score = standing.score
+    if score is None:
+        return "no score: no uniform_rmse in the results and no stored uniform entry for this suite"
+    tip = f"S = {score.S:.3f}, IQM of the gains {score.iqm:.3f}"
+    if standing.full or standing.entry.privileged:
+        return tip
+    best = best_ranked_on(board, score.tasks)
+    tip += f"; over its {len(score.tasks)} of {len(board.tasks)} tasks only"
+    if best is not None:
+        tip += f"; on those tasks the best ranked method, {best[0].entry.name}, has 2^S = {fmt_times(2.0 ** best[1])}"
+    return tip
+
+
+def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Sequence[Column], ranked: bool,
+                table_id: str) -> str:
+    n = len(board.tasks)
+    heads: list[tuple[str, str, str]] = []  # (label, sort type, title)
+    if ranked:
+        heads.append(("#", "number", "rank by the score (S). In the ranked table: 1 + the methods ahead beyond doubt "
+                                     "(paired 95% CI of the difference in S above 0); a shared # is a tie the seeds "
+                                     "cannot break"))
+    heads += [
+        ("Method", "text", "method name"),
+        ("Track", "text", "A: link trust, B: full estimator"),
+        ("2^S", "number", "× lower error than the standard CEKF (uniform): geometric mean over tasks"),
+        ("95% CI", "number", "stratified-bootstrap 95% CI of 2^S (seeds resampled within tasks)"),
+        ("Gap closed", "number", "share of the achievable gain (uniform to the information bound) closed, "
+                                 "mean over tasks where it is defined"),
+        ("Tasks", "number", "tasks covered / tasks in the suite"),
+    ]
+    heads += [(c.header, "number", f"× uniform over {c.title}; hover a cell for its worst task") for c in columns]
+    heads += [
+        ("Delay [ms]", "number", "mean computation delay per step"),
+        ("Energy [J]", "number", "mean energy per episode"),
+        ("Jitter", "number", "mean |Δ trust| per step"),
+        ("Status", "text", "verification status"),
+    ]
+    head_html = "".join(
+        f"<th scope=\"col\" data-type=\"{kind}\" title=\"{_e(tip)}\">"
+        f"<button type=\"button\">{_e(label)}</button></th>"
+        for label, kind, tip in heads
+    )
+    rows = []
+    for standing in standings:
+        entry, score = standing.entry, standing.score
+        k, _ = standing.coverage(n)
+        shown = standing.separable_rank if standing.separable_rank is not None else standing.rank
+        cells = [f"<td class=\"num\" data-value=\"{standing.rank}\">{shown}</td>"] if ranked else []
+        low_high = score.times_ci if score else None
+        cells += [
+            f"<td data-value=\"{_e(entry.name.casefold())}\">"
+            f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a></td>",
+            f"<td data-value=\"{_e(entry.track)}\">{_e(entry.track)}</td>",
+            _num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
+                      _score_tip(board, standing)),
+            _num_cell(low_high[0] if low_high else None,
+                      "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
+            _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
+            _num_cell(k, f"{k}/{n}"),
+            *(_column_cell(standing, c) for c in columns),
+            _num_cell(entry.delay_ms, fmt(entry.delay_ms, 2)),
+            _num_cell(entry.energy_j, fmt(entry.energy_j, 3)),
+            _num_cell(entry.jitter, fmt(entry.jitter, 4)),
+            f"<td data-value=\"{_e(status(entry))}\">{_e(status(entry))}</td>",
+        ]
+        rows.append(f"<tr data-method-id=\"{entry.id}\">{''.join(cells)}</tr>")
+    return (
+        f"<table class=\"sortable\" id=\"{_e(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n"
+        f"<tbody>\n" + "\n".join(rows) + "\n</tbody>\n</table>"
+    )
+
+
+def _slug(*parts: str) -> str:
+    text = "-".join(parts)
+    return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "suite"
+
+
+def _figures(plots: Sequence[SitePlot], root: Path) -> str:
+    if not plots:
+        return ""
+    figures = "\n".join(
+        f"<figure><img src=\"{_e(quote(p.path.relative_to(root).as_posix()))}\" alt=\"{_e(p.alt)}\">"
+        f"<figcaption>{_e(p.caption)}</figcaption></figure>"
+        for p in plots
+    )
+    return f"<h3>Plots</h3>\n<div class=\"plots suite-plots\">{figures}</div>"
+
+
+def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], root: Path) -> str:
+    generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    parts = [
+        "<header><h1>swarmloc leaderboard</h1>",
+        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by 2^S, how many "
+        "times lower the position error is than the standard CEKF's (uniform trust), the geometric mean "
+        "over the suite's tasks, with a stratified-bootstrap 95% CI. Family columns give × uniform over "
+        "the family's tasks (hover for the worst task). Click a column header to sort.</p></header>",
+        "<main>",
+    ]
+    if not boards:
+        parts.append("<p class=\"empty\">No submissions yet.</p>")
+    for board in boards:
+        slug = _slug(board.name, board.version)
+        columns = family_columns(board.tasks)
+        parts.append(f"<section class=\"suite\" id=\"suite-{slug}\">")
+        parts.append(f"<h2>Suite {_e(board.name)} <span class=\"version\">v{_e(board.version)}</span></h2>")
+        if board.ranked:
+            parts.append(_html_table(board, board.ranked, columns, ranked=True, table_id=f"ranked-{slug}"))
+        else:
+            parts.append("<p class=\"empty\">No ranked methods yet.</p>")
+        if board.partial:
+            parts.append(
+                "<h3>Partial coverage</h3><p class=\"meta\">These methods cannot run some tasks of the "
+                "suite. They are ranked apart, by 2^S over the tasks they cover (so compared with uniform "
+                "only on those tasks); * marks a family they cover in part.</p>"
+            )
+            parts.append(_html_table(board, board.partial, columns, ranked=True, table_id=f"partial-{slug}"))
+        if board.privileged:
+            parts.append(
+                "<h3>Privileged methods</h3><p class=\"meta\">These read ground truth or fault "
+                "labels (e.g. the oracle) and are not ranked.</p>"
+            )
+            parts.append(_html_table(board, board.privileged, columns, ranked=False,
+                                     table_id=f"privileged-{slug}"))
+        if board.filled:
+            ref = board.reference
+            parts.append(
+                f"<p class=\"meta\">The uniform RMSE of {board.filled} episode(s) (results files older "
+                "than results schema 2) is taken from the stored uniform entry"
+                + ("" if ref is None else f" (<a href=\"methods/{ref.id}.html\">#{ref.id}</a>)")
+                + " on the same task and seed.</p>"
+            )
+        parts.append(_figures(plots.get(slug, []), root))
+        parts.append("</section>")
+    parts.append("</main>")
+    return _page("swarmloc leaderboard", "\n".join(parts), root="")
+
+
+def _definition_rows(rows: Iterable[tuple[str, str]]) -> str:
+    return "\n".join(f"<tr><th scope=\"row\">{_e(k)}</th><td>{v}</td></tr>" for k, v in rows)
+
+
+def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | None]:
+    """Call ``swarmloc.bench.reports.plots.plot_results`` if it exists; (images, error note)."""
+    try:
+        from swarmloc.bench.reports.plots import plot_results  # type: ignore[import-not-found]
+    except ImportError:
+        return [], None
+    plots_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        plot_results(results_file, plots_dir)
+    except Exception as err:  # a broken plot must not take the site down
+        warnings.warn(f"plot_results failed for {results_file}: {err}", stacklevel=2)
+        return [], f"{type(err).__name__}: {err}"
+    images = sorted(p for p in plots_dir.iterdir() if p.suffix.lower() in _PLOT_SUFFIXES)
+    return images, None
+
+
+def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
+                 explanation: str = "") -> str:
+    entry, score = standing.entry, standing.score
+    results = json.loads(entry.results_json)
+    prov = results.get("provenance", {})
+    machine = prov.get("machine", {})
+    url = entry.url
+    url_html = (
+        f"<a href=\"{_e(url)}\" rel=\"nofollow noopener noreferrer\">{_e(url)}</a>"
+        if url and url.startswith(("http://", "https://")) else "—"
+    )
+    about = _definition_rows([
+        ("Authors", _e(entry.authors or "—")),
+        ("URL", url_html),
+        ("Track", _e({"A": "A — link trust", "B": "B — full estimator"}.get(entry.track, entry.track))),
+        ("Privileged", "yes" if entry.privileged else "no"),
+        ("Deterministic", "yes" if entry.deterministic else "no"),
+        ("Status", _e(status(entry))),
+        ("Entry point", f"<code>{_e(entry.entry_point)}</code>"),
+        ("Method hash", f"<code>{_e(entry.method_hash)}</code>"),
+        ("Weights SHA-256", f"<code>{_e(entry.weights_sha256 or '—')}</code>"),
+        ("Suite", _e(f"{entry.suite_name} v{entry.suite_version} ({entry.suite_sha256[:12]}…)")),
+        ("Submitted", _e(entry.created_utc.strftime("%Y-%m-%d %H:%M UTC"))),
+        ("Score", _e("—" if score is None else
+                     f"{fmt_score(score)}× lower error than uniform (S = {score.S:.3f}; IQM of the gains "
+                     f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")),
+    ])
+    provenance = _definition_rows([
+        ("swarmloc version", _e(prov.get("package_version", "—"))),
+        ("Git commit", f"<code>{_e(prov.get('git_commit') or '—')}</code>"),
+        ("Created", _e(prov.get("created_utc", "—"))),
+        ("Python", _e(prov.get("python_version", "—"))),
+        ("NumPy", _e(prov.get("numpy_version", "—"))),
+        ("PyTorch", _e(prov.get("torch_version") or "—")),
+        ("Platform", _e(machine.get("platform", "—"))),
+        ("CPUs", _e(machine.get("cpu_count", "—"))),
+    ])
+    present = {m for per in entry.task_aggregates.values() for m in per}
+    metrics = [m for m in METRIC_NAMES if m in present]
+    head = "".join(
+        f"<th scope=\"col\" data-type=\"number\"><button type=\"button\">{_e(m)}</button></th>"
+        for m in ("× uniform", "gap closed", *metrics)
+    )
+    body_rows = []
+    for task in sorted(entry.task_aggregates):
+        t = score.tasks.get(task) if score else None
+        cells = [
+            _num_cell(None if t is None else 2.0**t.mean, "—" if t is None else fmt_times(2.0**t.mean),
+                      None if t is None else f"G_t = {t.mean:.3f} (mean log2 gain over {t.gains.size} seeds)"),
+            _num_cell(None if t is None else t.gap_closed, fmt_pct(None if t is None else t.gap_closed)),
+        ]
+        for m in metrics:
+            agg = entry.task_aggregates[task].get(m)
+            if agg is None:
+                cells.append("<td class=\"num\" data-value=\"\">—</td>")
+            else:
+                tip = f"IQM {agg.iqm:.4g}, 95% CI [{agg.ci_low:.4g}, {agg.ci_high:.4g}]"
+                cells.append(f"<td class=\"num\" data-value=\"{agg.mean!r}\" title=\"{_e(tip)}\">"
+                             f"{_e(f'{agg.mean:.4g}')}</td>")
+        body_rows.append(f"<tr><th scope=\"row\" data-value=\"{_e(task)}\">{_e(task)}</th>"
+                         f"{''.join(cells)}</tr>")
+    per_task = (
+        "<table class=\"sortable\" id=\"per-task\">\n<thead><tr><th scope=\"col\" data-type=\"text\">"
+        f"<button type=\"button\">Task</button></th>{head}</tr></thead>\n<tbody>\n"
+        + "\n".join(body_rows) + "\n</tbody>\n</table>"
+    )
+    plots = ""
+    if images:
+        figures = "\n".join(
+            f"<figure><img src=\"../plots/{entry.id}/{_e(quote(p.name))}\" "
+            f"alt=\"{_e(p.stem.replace('_', ' '))}\" loading=\"lazy\"></figure>"
+            for p in images
+        )
+        plots = f"<section><h2>Plots</h2>\n<div class=\"plots\">{figures}</div></section>"
+    elif plot_error:
+        plots = f"<section><h2>Plots</h2><p class=\"meta\">Plots unavailable: {_e(plot_error)}</p></section>"
+    body = "\n".join([
+        "<header><p><a href=\"../index.html\">← leaderboard</a></p>",
+        f"<h1>{_e(entry.name)}</h1></header><main>",
+        f"<p class=\"description\">{_e(entry.description)}</p>" if entry.description else "",
+        f"<section><h2>Method</h2><table class=\"facts\">{about}</table></section>",
+        f"<section><h2>Provenance</h2><table class=\"facts\">{provenance}</table>",
+        f"<p><a href=\"../results/{entry.id}.json\" download>Download the results file</a></p></section>",
+        "<section><h2>Per-task results</h2><p class=\"meta\">× uniform: 2^G_t, G_t the mean over seeds of "
+        "log2(RMSE_uniform / RMSE); metrics: mean over seeds, hover for IQM and 95% CI.</p>\n"
+        f"{per_task}</section>",
+        plots,
+        explanation,
+        "</main>",
+    ])
+    return _page(f"{entry.name} — swarmloc leaderboard", body, root="../")
+
+
+def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None = None,
+                plots: bool = True, explanations: bool | None = None) -> Path:
+    """Write the static leaderboard site.
+
+    Layout: ``index.html`` (one section per suite: ranked, partial-coverage and privileged
+    tables, then the suite's plots from :mod:`swarmloc.leaderboard.site.plots`),
+    ``methods/<id>.html`` (metadata, provenance, per-task table, plots),
+    ``results/<id>.json`` (the submitted results files, for download),
+    ``plots/<id>/`` (images from ``swarmloc.bench.reports.plots.plot_results`` when available),
+    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn),
+    ``explain/<id>/`` (a shipped Track A method's trust decisions on the step-NLOS task:
+    :mod:`swarmloc.leaderboard.site.explain`)
+    and ``static/`` (CSS and the vanilla-JS table sorter). No external resources.
+
+    Args:
+        store: The store to read.
+        out_dir: Output directory (created; files it already holds are overwritten).
+        suite: Only this suite name (all suites when None).
+        plots: Draw each method's plots (re-runs the first seed of every task when the
+            results file has no traces beside it: minutes for a full suite).
+        explanations: Explain each shipped Track A method on the step-NLOS task (one 50 s
+            episode each, seconds to a minute per method); default: as ``plots``.
+
+    Returns:
+        Path of ``index.html``.
+    """
+    out = Path(out_dir)
+    for sub in ("static", "methods", "results", "plots"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    package_static = resources.files("swarmloc.leaderboard.site") / "static"
+    for name in _STATIC_FILES:
+        (out / "static" / name).write_bytes((package_static / name).read_bytes())
+    boards = suite_boards(store.entries(suite))
+    explain = plots if explanations is None else explanations
+    for board in boards:
+        for standing in board.standings:
+            _write_method(out, standing, len(board.tasks), plots, explain)
+    suite_figures = {}
+    for board in boards:
+        slug = _slug(board.name, board.version)
+        suite_figures[slug] = _draw_suite_plots(board, out / "plots" / f"suite-{slug}")
+    index = out / "index.html"
+    index.write_text(_index_html(boards, suite_figures, out), encoding="utf-8")
+    return index
+
+
+def _draw_suite_plots(board: SuiteBoard, plots_dir: Path) -> list[SitePlot]:
+    """The suite's plots (none, with a warning, if drawing fails: the tables still render)."""
+    from swarmloc.leaderboard.site.plots import suite_plots
+
+    if plots_dir.exists():
+        shutil.rmtree(plots_dir)
+    try:
+        return suite_plots(board, plots_dir)
+    except Exception as err:  # a broken plot must not take the site down
+        warnings.warn(f"suite plots of {board.name} v{board.version} failed: {err}", stacklevel=2)
+        return []
+
+
+def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False) -> None:
+    """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
+    entry = standing.entry
+    results_file = out / "results" / f"{entry.id}.json"
+    results_file.write_text(entry.results_json, encoding="utf-8")
+    plots_dir = out / "plots" / str(entry.id)
+    if plots_dir.exists():
+        shutil.rmtree(plots_dir)
+    images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
+    (out / "methods" / f"{entry.id}.html").write_text(
+        _method_html(standing, n_tasks, images, error, _make_explanation(entry, out) if explain else ""),
+        encoding="utf-8",
+    )
+
+
+def _make_explanation(entry: LeaderboardEntry, out: Path) -> str:
+    """The page's explanation section for a shipped Track A method ("" for any other entry)."""
+    from swarmloc.leaderboard.site import explain as site_explain
+    if not site_explain.explainable(entry):
+        return ""
+    try:
+        return site_explain.explanation_section(site_explain.write_explanation(entry, out), None)
+    except Exception as err:  # noqa: BLE001 - a failed explanation must not take the site down
+        warnings.warn(f"explanation of {entry.name} failed: {err}", stacklevel=2)
+        return site_explain.explanation_section(None, f"{type(err).__name__}: {err}")
+
+
+__all__ = ["render_html"]

@@ -1,0 +1,1 @@
+"""The results store (SQLAlchemy), its records and schema, and the shipped results."""

@@ -1,0 +1,1 @@
+"""Submissions: the pipeline from a results file to a stored entry, entry points, metadata."""

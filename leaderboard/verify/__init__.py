@@ -1,0 +1,1 @@
+"""Verification: sandboxed re-runs of a sample of submitted episodes."""
