@@ -169,10 +169,6 @@ def run_jobs(fn: JobFunction, jobs: Sequence[Job], *, backend: Backend = "serial
 # --------------------------------------------------------------------------- process
 
 
-#: set by ``worker_init``: this process is a worker of the process pool
-_POOL_WORKER = False
-
-
 def worker_init() -> None:
     """Spawned workers run numba, and torch where a job loads it, single-threaded (the
     parallelism is across jobs) and leave Ctrl-C to the parent, which stops them.
@@ -182,19 +178,22 @@ def worker_init() -> None:
     imports torch only when its first job loads a method that uses it, so its thread count
     is set then, by ``pin_torch_threads``, once and never switched back.
     """
-    global _POOL_WORKER
     import numba
 
-    _POOL_WORKER = True
     numba.set_num_threads(1)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def pin_torch_threads() -> None:
-    """In a pool worker, put torch on one thread if a job has imported it (a no-op elsewhere, and
-    after the first time). Call it after loading a method and before running it."""
+    """Put torch on one thread if a job has imported it (a no-op without torch, and after the first
+    time). Call it after loading a method and before running it.
+
+    In every process, the caller's included: a threaded matrix product may sum in an order that
+    depends on the thread count (MKL on AVX-512 CPUs), and a learned method must act the same on
+    every backend. In a pool worker it also keeps two workers from spinning four threads on two cores.
+    """
     torch = sys.modules.get("torch")
-    if _POOL_WORKER and torch is not None and torch.get_num_threads() != 1:
+    if torch is not None and torch.get_num_threads() != 1:
         torch.set_num_threads(1)
 
 

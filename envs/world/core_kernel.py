@@ -9,7 +9,7 @@ batch size); both take their named tuples through a ``StepHandle``. Per episode 
 1. posterior at the pending step k: the trust-weighted joint update (``cekf.update_uav``);
    estimate, truth, labels, validity, trust and FLOPs of the update are written out; the
    episode counts one more update and is done after ``n_steps``;
-2. if it goes on: the world senses step k+1 (``world_kernel.sense_episodes``; skipped when
+2. if it goes on: the world senses step k+1 (``sim_kernel.sense_episodes``; skipped when
    the world inputs are None, for worlds that sense in Python), every UAV predicts to it
    (``cekf.predict_uav``) and the per-channel innovation features at the prior are
    computed (``cekf.features_uav``), with the IMU jerk ‖u(k+1) − u(k)‖, and the pending

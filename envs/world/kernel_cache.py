@@ -2,7 +2,7 @@
 
 numba's disk cache (``@njit(cache=True)``, files ``__pycache__/*.nbi`` / ``*.nbc``) checks
 only the source file that *defines* a cached function. A kernel compiles its callees into
-itself, so after an edit of a callee in another module (``cekf.py`` under ``world_kernel.py``,
+itself, so after an edit of a callee in another module (``cekf.py`` under ``sim_kernel.py``,
 ``envs`` kernels under ``agents`` ones) the caller's cached machine code still runs the old
 callee: wrong numbers, silently, after a ``git pull`` of an editable install or a
 ``pip install -U`` (pip leaves the cache files behind). ``tests/test_kernel_cache.py``

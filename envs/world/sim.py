@@ -69,7 +69,7 @@ class SenseBuffers:
         z: ``(B, N, L, 3)`` measurements (ranges in component 0).
         valid: ``(B, N, L)`` measurement present.
         label: ``(B, N, L)`` injected-fault label: the channel carries a fault the scenario
-            injected (a range error above ``world_kernel.INJECTED_FAULT_SIGMAS`` nominal σ, a
+            injected (a range error above ``sim_kernel.INJECTED_FAULT_SIGMAS`` nominal σ, a
             drifting GPS fix, a peer link to an IMU-faulty neighbour); what the detection
             metrics count (``anomaly_detection_rate``, ``fault_rmse`` without a fault window).
         injected: ``(B, N, L)`` magnitude of the injected (non-noise) error [m].
