@@ -1,7 +1,8 @@
-"""Package layout: the four rooms install as subpackages of the ``swarmloc`` namespace.
+"""Package layout: the five rooms install as subpackages of the ``swarmloc`` namespace.
 
 ``swarmloc.envs`` → ``envs/``, ``swarmloc.agents`` → ``agents/``, ``swarmloc.bench`` →
-``bench/``, ``swarmloc.leaderboard`` → ``leaderboard/``; their subpackages are discovered
+``bench/``, ``swarmloc.leaderboard`` → ``leaderboard/``, ``swarmloc.cli`` → ``cli/``
+(docs/architecture.md); their subpackages are discovered
 so a new folder with an ``__init__.py`` is never left out of a wheel (``tests/test_packaging.py``
 fails on a code folder without one). Everything else lives in pyproject.toml.
 """
