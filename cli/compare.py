@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 import tyro
 
+from swarmloc.bench.scoring.bootstrap import DEFAULT_RESAMPLES
+
 if TYPE_CHECKING:
     from rich.console import Console
 
@@ -22,7 +24,7 @@ class Options:
     """Results file of the reference (baseline), from `swarmloc evaluate`."""
     b: tyro.conf.Positional[Path]
     """Results file compared with it (same suite)."""
-    resamples: int = 2000
+    resamples: int = DEFAULT_RESAMPLES
     """Bootstrap resamples of the paired CIs (the leaderboard's default)."""
     json: Path | None = None
     """Also write the comparison as JSON to this file."""

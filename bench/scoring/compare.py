@@ -16,17 +16,15 @@ on a seed leaves the task out, as on the leaderboard); what was left out is list
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-
-import math
 
 import numpy as np
 
 from swarmloc.bench.evaluation.results import Results
+from swarmloc.bench.scoring.bootstrap import DEFAULT_RESAMPLES, DEFAULT_SEED
 from swarmloc.bench.scoring.score import (
-    DEFAULT_RESAMPLES,
-    DEFAULT_SEED,
     PairedDifference,
     SuiteScore,
     paired_difference,

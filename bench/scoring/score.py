@@ -31,12 +31,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmloc.bench.scoring.bootstrap import (
+    DEFAULT_CONFIDENCE,
+    DEFAULT_RESAMPLES,
+    DEFAULT_SEED,
+    percentile_interval,
+    resampled_means,
+)
 from swarmloc.bench.scoring.stats import iqm
 
 #: tasks whose bound is within this ratio of uniform have no gap-closed ratio
 MIN_ACHIEVABLE_GAIN = math.log2(1.25)
-DEFAULT_RESAMPLES = 2000
-DEFAULT_SEED = 0
 
 
 def episode_gain(rmse_uniform: float | None, rmse: float | None) -> float | None:
@@ -131,11 +136,12 @@ def task_score(task: str, gains: Sequence[float], achievable: Sequence[float | N
 
 
 def bootstrap_suite_ci(tasks: Sequence[np.ndarray], n_resamples: int = DEFAULT_RESAMPLES,
-                       seed: int = DEFAULT_SEED, confidence: float = 0.95) -> tuple[float, float]:
+                       seed: int = DEFAULT_SEED, confidence: float = DEFAULT_CONFIDENCE) -> tuple[float, float]:
     """Stratified-bootstrap CI of the mean over tasks of the per-task mean.
 
     Each resample draws every task's seeds with replacement (within the task) and
-    recomputes the mean of task means; the CI is the percentile interval.
+    recomputes the mean of task means; the CI is the percentile interval
+    (:mod:`swarmloc.bench.scoring.bootstrap`).
 
     Args:
         tasks: per task, ``(n_t,)`` values.
@@ -145,16 +151,13 @@ def bootstrap_suite_ci(tasks: Sequence[np.ndarray], n_resamples: int = DEFAULT_R
     """
     if not tasks:
         raise ValueError("need at least one task")
-    rng = np.random.default_rng(seed)
-    means = np.zeros(n_resamples)
-    for x in tasks:
-        x = np.asarray(x, dtype=np.float64)
-        picks = rng.integers(0, x.size, size=(n_resamples, x.size))
-        means += x[picks].mean(axis=1)
-    means /= len(tasks)
-    tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = np.percentile(means, [tail, 100.0 - tail])
+    low, high = percentile_interval(_resampled_suite_mean(resampled_means(tasks, n_resamples, seed)), confidence)
     return float(low), float(high)
+
+
+def _resampled_suite_mean(task_means: Sequence[np.ndarray]) -> np.ndarray:
+    """``(..., R)``: the resampled S, the mean over tasks of their ``(..., R)`` resampled means."""
+    return sum(task_means) / len(task_means)
 
 
 def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None = None, *,
@@ -221,8 +224,6 @@ def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
                       seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per task, the ``(methods, n)`` paired gains and ``(methods, n_resamples)`` resampled task means.
 
-    One draw of seeds per resample is shared by every method.
-
     The stratified bootstrap of :func:`bootstrap_suite_ci`, paired: each resample draws a
     task's seeds once and applies that draw to every method, so two methods are compared
     episode by episode (same task, same seed: the same world).
@@ -231,17 +232,12 @@ def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
         ValueError: the scores cover different tasks or seeds, or carry no seeds.
     """
     tasks = list(dict.fromkeys(task for score in scores for task in score.tasks))  # _paired_gains: all cover each
-    rng = np.random.default_rng(seed)
-    out = {}
-    for task in tasks:
-        gains = _paired_gains(scores, task)
-        picks = rng.integers(0, gains.shape[1], size=(n_resamples, gains.shape[1]))
-        out[task] = gains, gains[:, picks].mean(axis=2)
-    return out
+    gains = [_paired_gains(scores, task) for task in tasks]
+    return dict(zip(tasks, zip(gains, resampled_means(gains, n_resamples, seed))))
 
 
 def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED,
-                    confidence: float = 0.95) -> list[int]:
+                    confidence: float = DEFAULT_CONFIDENCE) -> list[int]:
     """Each method's rank as 1 + the number of others whose S is higher beyond doubt.
 
     "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0
@@ -261,11 +257,10 @@ def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RES
     if not scores:
         return []
     per_task = _paired_resamples(scores, n_resamples, seed)
-    resampled = sum(r for _, r in per_task.values()) / len(per_task)  # (methods, n_resamples): resampled S of each
-    tail = 100.0 * (1.0 - confidence) / 2.0
+    resampled = _resampled_suite_mean([r for _, r in per_task.values()])  # (methods, n_resamples): resampled S
     ranks = []
     for i in range(len(scores)):
-        low = np.percentile(resampled - resampled[i], tail, axis=1)  # (methods,): the lower CI end of each lead
+        low, _ = percentile_interval(resampled - resampled[i], confidence)  # (methods,): the lower CI end of each lead
         ranks.append(1 + int(np.sum(low > 0.0)))
     return ranks
 
@@ -289,7 +284,7 @@ class PairedDifference:
 
 
 def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_RESAMPLES,
-                      seed: int = DEFAULT_SEED, confidence: float = 0.95
+                      seed: int = DEFAULT_SEED, confidence: float = DEFAULT_CONFIDENCE
                       ) -> tuple[PairedDifference, dict[str, PairedDifference]]:
     """How much B gains over A: ``S_B − S_A`` and, per task, ``G_B − G_A``, with paired CIs.
 
@@ -308,14 +303,13 @@ def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_R
         ValueError: the scores cover different tasks or seeds, or carry no seeds.
     """
     per_task = _paired_resamples([a, b], n_resamples, seed)
-    tail = 100.0 * (1.0 - confidence) / 2.0
     tasks = {}
     for task, (gains, resampled) in per_task.items():
-        low, high = np.percentile(resampled[1] - resampled[0], [tail, 100.0 - tail])
+        low, high = percentile_interval(resampled[1] - resampled[0], confidence)
         tasks[task] = PairedDifference(float(np.mean(gains[1] - gains[0])), float(low), float(high),
                                        int(np.sum(gains[1] > gains[0])), int(gains.shape[1]))
-    suite = sum(r for _, r in per_task.values()) / len(per_task)
-    low, high = np.percentile(suite[1] - suite[0], [tail, 100.0 - tail])
+    suite = _resampled_suite_mean([r for _, r in per_task.values()])
+    low, high = percentile_interval(suite[1] - suite[0], confidence)
     means = [d.mean for d in tasks.values()]
     return (PairedDifference(float(np.mean(means)), float(low), float(high), sum(m > 0 for m in means), len(means)),
             tasks)

@@ -4,14 +4,13 @@ Following rliable's recommendation (Agarwal et al., 2021) we report the mean and
 interquartile mean (IQM) of each metric over seeds, with a 95 % percentile-bootstrap
 confidence interval of the mean. Across several tasks the bootstrap is *stratified*:
 each resample draws seeds with replacement inside every task separately, so each task
-keeps its number of runs. Resampling uses a seeded numpy generator and sorts runs by
-(task, seed) first, so the same episodes give the same interval in any order. The score
-across tasks (log2 gain over uniform) is in ``score.py``.
+keeps its number of runs. The draws and the interval are the package's one bootstrap
+(``bootstrap.py``); runs are sorted by (task, seed) first, so the same episodes give the same
+interval in any order. The score across tasks (log2 gain over uniform) is in ``score.py``.
 """
 
 from __future__ import annotations
 
-import functools
 from collections import defaultdict
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from typing import Any, Literal
@@ -20,17 +19,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Aggregate, Episode
+from swarmloc.bench.scoring.bootstrap import (
+    DEFAULT_CONFIDENCE,
+    DEFAULT_RESAMPLES,
+    DEFAULT_SEED,
+    percentile_interval,
+    stratified_draws,
+)
 
 Statistic = Literal["mean", "iqm"]
-
-DEFAULT_RESAMPLES: int = 2000
-"""Bootstrap resamples per interval."""
-
-DEFAULT_CONFIDENCE: float = 0.95
-"""Two-sided confidence level of the intervals."""
-
-DEFAULT_BOOTSTRAP_SEED: int = 0
-"""Seed of the bootstrap generator (fixed so that aggregates are reproducible)."""
 
 
 def _as_1d(values: ArrayLike) -> NDArray[np.float64]:
@@ -78,35 +75,6 @@ def _apply(statistic: Statistic, samples: NDArray[np.float64]) -> NDArray[np.flo
     raise ValueError(f"unknown statistic {statistic!r}; allowed: 'mean', 'iqm'")
 
 
-#: draw tables up to this many indices are kept for reuse (8 tables of at most 8 MB)
-_CACHED_DRAWS = 2**20
-
-
-def _stratum_draws(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
-    """The resample indices of each stratum, ``(n_resamples, size)`` each, in stratum order.
-
-    They depend only on the seed, the resample count and the strata sizes, not on the
-    values: every metric of a task (same seeds) resamples the same rows, so the tables are
-    drawn once and reused (read-only) when small.
-    """
-    if n_resamples * sum(sizes) <= _CACHED_DRAWS:
-        return _cached_draws(seed, n_resamples, sizes)
-    return _draw(seed, n_resamples, sizes)
-
-
-def _draw(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
-    rng = np.random.default_rng(seed)
-    return tuple(rng.integers(0, size, size=(n_resamples, size)) for size in sizes)
-
-
-@functools.lru_cache(maxsize=8)
-def _cached_draws(seed: int, n_resamples: int, sizes: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
-    draws = _draw(seed, n_resamples, sizes)
-    for table in draws:
-        table.setflags(write=False)
-    return draws
-
-
 def bootstrap_ci(
     values: ArrayLike,
     strata: Sequence[Hashable] | None = None,
@@ -114,7 +82,7 @@ def bootstrap_ci(
     statistic: Statistic = "mean",
     confidence: float = DEFAULT_CONFIDENCE,
     n_resamples: int = DEFAULT_RESAMPLES,
-    seed: int = DEFAULT_BOOTSTRAP_SEED,
+    seed: int = DEFAULT_SEED,
 ) -> tuple[float, float]:
     """Percentile bootstrap confidence interval, stratified when ``strata`` is given.
 
@@ -137,25 +105,17 @@ def bootstrap_ci(
         ``(low, high)``.
     """
     x = _as_1d(values)
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    if n_resamples < 1:
-        raise ValueError(f"n_resamples must be at least 1, got {n_resamples}")
     labels: Sequence[Hashable] = [0] * x.size if strata is None else strata
     if len(labels) != x.size:
         raise ValueError(f"strata has {len(labels)} labels for {x.size} values; they must match")
     groups: dict[Hashable, list[int]] = defaultdict(list)
     for index, label in enumerate(labels):
         groups[label].append(index)
-    ordered = [groups[label] for label in sorted(groups, key=repr)]
-    samples = np.empty((n_resamples, x.size), dtype=np.float64)
-    column = 0
-    for members, draws in zip(ordered, _stratum_draws(seed, n_resamples, tuple(map(len, ordered))), strict=True):
-        samples[:, column : column + len(members)] = x[members][draws]
-        column += len(members)
-    resampled = _apply(statistic, samples)
-    tail = (1.0 - confidence) / 2.0
-    low, high = np.quantile(resampled, [tail, 1.0 - tail])
+    ordered = [x[groups[label]] for label in sorted(groups, key=repr)]
+    draws = stratified_draws([len(members) for members in ordered], n_resamples, seed)
+    # (R, n): every stratum's resampled runs side by side, pooled for the statistic
+    samples = np.concatenate([members[picks] for members, picks in zip(ordered, draws, strict=True)], axis=1)
+    low, high = percentile_interval(_apply(statistic, samples), confidence)
     lo_data, hi_data = float(np.min(x)), float(np.max(x))
     return float(np.clip(low, lo_data, hi_data)), float(np.clip(high, lo_data, hi_data))
 
@@ -165,7 +125,7 @@ def summarize(
     strata: Sequence[Hashable] | None = None,
     *,
     n_resamples: int = DEFAULT_RESAMPLES,
-    seed: int = DEFAULT_BOOTSTRAP_SEED,
+    seed: int = DEFAULT_SEED,
 ) -> Aggregate:
     """Mean, IQM and the 95 % (stratified) bootstrap CI of the mean of some runs."""
     x = _as_1d(values)
@@ -186,7 +146,7 @@ def aggregate(
     episodes: Iterable[Episode | Mapping[str, Any]],
     *,
     n_resamples: int = DEFAULT_RESAMPLES,
-    seed: int = DEFAULT_BOOTSTRAP_SEED,
+    seed: int = DEFAULT_SEED,
 ) -> dict[str, dict[str, Aggregate | None]]:
     """Per-task aggregates of every metric over seeds, in the results-file shape.
 
@@ -217,9 +177,6 @@ def aggregate(
 
 
 __all__ = [
-    "DEFAULT_BOOTSTRAP_SEED",
-    "DEFAULT_CONFIDENCE",
-    "DEFAULT_RESAMPLES",
     "aggregate",
     "bootstrap_ci",
     "iqm",
