@@ -73,12 +73,11 @@ class Options:
     cluster of every CPU here)."""
 
 
-def _module_search_path(opts: Options) -> tuple[Path, ...]:
+def _module_search_path(entry_point: str) -> tuple[Path, ...]:
     """The working directory for a `module:factory` method found nowhere else (as `swarmloc evaluate` imports it)."""
     from swarmloc.leaderboard.submit.entry_points import locate_source, parse_entry_point
-    from swarmloc.leaderboard.store.schema import read_results
 
-    entry = parse_entry_point(opts.entry_point or read_results(opts.results).method.entry_point)
+    entry = parse_entry_point(entry_point)
     if entry.kind != "module" or locate_source(entry) is not None:
         return ()
     return (Path.cwd(),)
@@ -95,6 +94,7 @@ def run(opts: Options, console: Console | None = None) -> int:
 
     from swarmloc.cli.extras import missing_extra
     from swarmloc.leaderboard.errors import StoreError, SubmissionError
+    from swarmloc.leaderboard.store.schema import read_submitted_results
     from swarmloc.leaderboard.submit.pipeline import submit
     from swarmloc.leaderboard.verify.verification import VerifyLimits, run_in_worker
 
@@ -109,9 +109,11 @@ def run(opts: Options, console: Console | None = None) -> int:
 
         rerun = ray_rerun(opts.address)
     try:
+        results = read_submitted_results(opts.results)  # the one read: every step of the submission uses it
+        entry_point = opts.entry_point or results.results.method.entry_point
         receipt = submit(
-            opts.results,
-            opts.entry_point,
+            results,
+            entry_point,
             {
                 "name": opts.name, "authors": opts.authors, "url": opts.url,
                 "description": opts.description, "track": opts.track, "privileged": opts.privileged,
@@ -124,7 +126,7 @@ def run(opts: Options, console: Console | None = None) -> int:
             sample_seed=opts.seed,
             limits=VerifyLimits(wall_time_s=opts.time_limit_s, memory_bytes=opts.memory_limit_mb * 1024**2,
                                 max_processes=opts.max_processes, max_file_bytes=opts.max_file_mb * 1024**2),
-            search_path=opts.search_path or _module_search_path(opts),
+            search_path=opts.search_path or _module_search_path(entry_point),
             sandbox=opts.sandbox,
             rerun=rerun,
         )

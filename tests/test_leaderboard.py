@@ -225,6 +225,22 @@ def test_oversized_results_file_is_rejected(db_url: str, tmp_path: Path) -> None
     assert _snapshot(db_url) == before
 
 
+def test_a_results_file_read_already_is_held_to_the_same_limit(tmp_path: Path) -> None:
+    from swarmloc.bench.evaluation.results import read_results_file
+    from swarmloc.leaderboard.store.schema import SizeLimits, make_submission, validate_submission
+
+    path = H.make_results_file(tmp_path / "read.json", "lb_fake_runner:good_read")
+    read = read_results_file(path)  # no limit here: validation applies the leaderboard's
+    submission = make_submission(path, "lb_fake_runner:good_read", META)
+    assert validate_submission(submission, H.suite_lookup, results_file=read).results_text == read.text
+    with pytest.raises(InvalidSubmission, match=rf"read\.json is {read.size} bytes; the limit is 100 bytes"):
+        validate_submission(submission, H.suite_lookup, SizeLimits(results_bytes=100), results_file=read)
+    other = make_submission(H.make_results_file(tmp_path / "other.json", "lb_fake_runner:good_read"),
+                            "lb_fake_runner:good_read", META)
+    with pytest.raises(ValueError, match=r"results_file is .*read\.json, but the submission names .*other\.json"):
+        validate_submission(other, H.suite_lookup, results_file=read)
+
+
 def test_truncated_results_file_is_rejected(db_url: str, tmp_path: Path) -> None:
     path = H.make_results_file(tmp_path / "cut.json", "lb_fake_runner:good_cut")
     path.write_text(path.read_text()[:-200])
@@ -296,6 +312,38 @@ def test_trust_is_only_for_shipped_methods(db_url: str, tmp_path: Path) -> None:
     path = H.make_results_file(tmp_path / "s.json", shipped)
     receipt = _submit(path, shipped, db_url, {"name": "shipped", "track": "A"}, trust=True)
     assert receipt.report is None and receipt.entry.trusted and not receipt.entry.verified
+
+
+def test_submit_reads_the_results_file_once(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`swarmloc submit` and ``submit()`` read the file once; the store keeps the text that was validated."""
+    import builtins
+    import os
+
+    cli_file = H.make_results_file(tmp_path / "cli.json", min(store_module.SHIPPED_REFERENCE_METHODS),
+                                   name="read once by the command")
+    api_file = H.make_results_file(tmp_path / "api.json", "lb_fake_runner:good_once", name="read once by submit")
+    reads: list[Path] = []
+    real_open = builtins.open
+
+    def counting_open(file: Any, *args: Any, **kwargs: Any) -> Any:
+        if isinstance(file, (str, os.PathLike)) and Path(file) in (cli_file, api_file):
+            reads.append(Path(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", counting_open)
+    monkeypatch.setattr(io, "open", counting_open)  # what pathlib opens with
+    monkeypatch.setattr("swarmloc.leaderboard.store.schema.default_suite_lookup", H.suite_lookup)
+    console = Console(record=True, width=250, file=io.StringIO())
+    # no entry point, no search path: the command takes both from the file
+    done = submit_command.run(submit_command.Options(results=cli_file, trust=True, db_url=db_url), console)
+    assert done == 0, console.export_text()
+    _submit(api_file, "lb_fake_runner:good_once", db_url, {"name": "read once by submit", "track": "A"})
+    assert reads == [cli_file, api_file]
+    monkeypatch.undo()
+    with LeaderboardStore(db_url) as store:
+        stored = {e.name: e.results_json for e in store.entries(H.SUITE.name)}
+    assert stored["read once by the command"] == cli_file.read_text()
+    assert stored["read once by submit"] == api_file.read_text()
 
 
 def test_shipped_allow_list_matches_the_agents_registry() -> None:

@@ -179,6 +179,21 @@ def test_missing_file_and_size_limit(tmp_path: Path) -> None:
         R.load_results(path, max_bytes=100)
 
 
+
+def test_read_results_file_keeps_the_exact_text(tmp_path: Path) -> None:
+    path = tmp_path / "r.json"
+    text = R.dumps_results(_results()).replace("\n", "\r\n")  # any layout: the text is kept as it is
+    path.write_bytes(text.encode("utf-8"))
+    read = R.read_results_file(path, max_bytes=len(text))
+    assert (read.path, read.text, read.size) == (path, text, len(text))
+    assert read.results == R.load_results(path) == _results().model_copy(update={"provenance": read.results.provenance})
+    with pytest.raises(R.ResultsFileError, match=r"is not a regular file"):
+        R.read_results_file(tmp_path)
+    with pytest.raises(R.ResultsFileError, match=r"r\.json/x\.json cannot be read: Not a directory"):
+        R.read_results_file(path / "x.json")
+    with pytest.raises(R.ResultsFileError, match=r"is \d+ bytes; the limit is \d+ bytes"):
+        R.read_results_file(path, max_bytes=len(text) - 1)
+
 def test_metric_helpers() -> None:
     with pytest.raises(ValueError, match=r"unknown metric name\(s\) \['accuracy'\]"):
         R.EpisodeMetrics.of(accuracy=1.0)

@@ -31,6 +31,7 @@ import json
 import os
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -435,6 +436,14 @@ def _ends_inside_value(text: str) -> bool:
     return in_string or depth > 0
 
 
+def _decode(raw: bytes, source: str) -> str:
+    """The file's text, or the error naming it as corrupted when it is not UTF-8."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ResultsFileError(f"results file {source} is corrupted: not UTF-8 text ({err})") from None
+
+
 def parse_results(text: str | bytes, source: str = "<results>") -> Results:
     """Parse and validate results JSON text.
 
@@ -447,12 +456,7 @@ def parse_results(text: str | bytes, source: str = "<results>") -> Results:
             likely truncation, unsupported schema version, or schema violations).
     """
     if isinstance(text, bytes):
-        try:
-            text = text.decode("utf-8")
-        except UnicodeDecodeError as err:
-            raise ResultsFileError(
-                f"results file {source} is corrupted: not UTF-8 text ({err})"
-            ) from None
+        text = _decode(text, source)
     if not text.strip():
         raise ResultsFileError(f"results file {source} is empty")
     try:
@@ -485,8 +489,68 @@ def parse_results(text: str | bytes, source: str = "<results>") -> Results:
         ) from None
 
 
+@dataclass(frozen=True)
+class ResultsFile:
+    """A results file as read once: where it came from, its exact text and the validated results.
+
+    The leaderboard keeps the text as submitted (for download) and checks the results; both
+    come from the one read, so what is stored is what was validated.
+
+    Attributes:
+        path: The file.
+        text: Its exact contents.
+        results: The validated results.
+    """
+
+    path: Path
+    text: str
+    results: Results
+
+    @property
+    def size(self) -> int:
+        """The file's length in bytes."""
+        return len(self.text.encode("utf-8"))
+
+
+def read_results_file(path: str | os.PathLike[str], max_bytes: int | None = None) -> ResultsFile:
+    """Read and validate a results file, keeping its exact text (what :func:`load_results` reads).
+
+    Args:
+        path: The file.
+        max_bytes: Refuse files larger than this, if given: checked before reading, and no
+            more than ``max_bytes + 1`` bytes are read (a file growing meanwhile is refused too).
+
+    Returns:
+        The path, the text and the validated :class:`Results`.
+
+    Raises:
+        ResultsFileError: as :func:`load_results`.
+    """
+    file = Path(path)
+    try:
+        size = file.stat().st_size
+    except FileNotFoundError:
+        raise ResultsFileError(f"results file {file} does not exist") from None
+    except OSError as err:
+        raise ResultsFileError(f"results file {file} cannot be read: {err.strerror or err}") from None
+    if not file.is_file():
+        raise ResultsFileError(f"results file {file} is not a regular file")
+    if max_bytes is not None and size > max_bytes:
+        raise ResultsFileError(f"results file {file} is {size} bytes; the limit is {max_bytes} bytes")
+    try:
+        with file.open("rb") as handle:
+            raw = handle.read() if max_bytes is None else handle.read(max_bytes + 1)
+    except OSError as err:
+        raise ResultsFileError(f"results file {file} cannot be read: {err.strerror or err}") from None
+    if max_bytes is not None and len(raw) > max_bytes:
+        raise ResultsFileError(f"results file {file} grew past {max_bytes} bytes while it was read; "
+                               f"the limit is {max_bytes} bytes")
+    text = _decode(raw, str(file))
+    return ResultsFile(path=file, text=text, results=parse_results(text, source=str(file)))
+
+
 def load_results(path: str | os.PathLike[str], max_bytes: int | None = None) -> Results:
-    """Read and validate a results file.
+    """Read and validate a results file: the one reader of results files.
 
     Args:
         path: The file.
@@ -500,18 +564,7 @@ def load_results(path: str | os.PathLike[str], max_bytes: int | None = None) -> 
             UTF-8, truncated or otherwise invalid JSON, wrong schema version, or a
             schema violation (with the offending fields).
     """
-    file = Path(path)
-    try:
-        size = file.stat().st_size
-    except FileNotFoundError:
-        raise ResultsFileError(f"results file {file} does not exist") from None
-    if not file.is_file():
-        raise ResultsFileError(f"results file {file} is not a regular file")
-    if max_bytes is not None and size > max_bytes:
-        raise ResultsFileError(
-            f"results file {file} is {size} bytes; the limit is {max_bytes} bytes"
-        )
-    return parse_results(file.read_bytes(), source=str(file))
+    return read_results_file(path, max_bytes).results
 
 
 __all__ = [
@@ -527,6 +580,7 @@ __all__ = [
     "MethodInfo",
     "Provenance",
     "Results",
+    "ResultsFile",
     "ResultsFileError",
     "ScoreBlock",
     "SuiteInfo",
@@ -536,6 +590,7 @@ __all__ = [
     "load_results",
     "make_results",
     "parse_results",
+    "read_results_file",
     "score_block",
     "suite_sha256",
     "write_results",

@@ -5,7 +5,8 @@ point, an optional weights file, and metadata. :func:`validate_submission` check
 order and without running any submitted code:
 
 1. sizes: the results file and the weights file are within :class:`SizeLimits`;
-2. the results file parses and matches its schema;
+2. the results file parses and matches its schema (read once, by
+   :func:`swarmloc.bench.evaluation.results.read_results_file`: the file read is the file stored);
 3. the entry point, track, privileged flag and weights hash agree with the results
    (metadata itself is checked by :class:`~swarmloc.leaderboard.submit.metadata.SubmissionMetadata`);
 4. the suite exists and the results name its current version and hash;
@@ -31,15 +32,22 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
-from swarmloc.bench.evaluation.results import METRIC_NAMES, Results, ResultsFileError, parse_results, score_block
+from swarmloc.bench.evaluation.results import (
+    METRIC_NAMES,
+    Results,
+    ResultsFile,
+    ResultsFileError,
+    read_results_file,
+    score_block,
+)
 from swarmloc.bench.scoring.stats import aggregate
+from swarmloc.leaderboard.errors import InvalidSubmission
 from swarmloc.leaderboard.submit.entry_points import (
     EntryPoint,
     locate_source,
     parse_entry_point,
     sha256_file,
 )
-from swarmloc.leaderboard.errors import InvalidSubmission
 from swarmloc.leaderboard.submit.metadata import SubmissionMetadata
 
 SUBMISSION_VERSION: Literal[1] = 1
@@ -206,21 +214,24 @@ def _file_size(path: Path, what: str, limit: int) -> None:
         raise InvalidSubmission(f"{what} {path} is {size} bytes; the limit is {limit} bytes")
 
 
-def _read_bytes(path: Path, limits: SizeLimits) -> bytes:
-    _file_size(path, "results file", limits.results_bytes)
-    return path.read_bytes()
+def read_submitted_results(path: str | Path, limits: SizeLimits = SizeLimits()) -> ResultsFile:
+    """Read a submitted results file once, within the size limit, refusing it as :class:`InvalidSubmission`.
 
+    Args:
+        path: The results file.
+        limits: Its largest size is ``limits.results_bytes``.
 
-def _parse(raw: bytes, path: Path) -> Results:
+    Returns:
+        Its path, exact text and validated results, to pass along to :func:`validate_submission`.
+
+    Raises:
+        InvalidSubmission: the file is missing, too large or not a valid results file (the
+            message of :class:`~swarmloc.bench.evaluation.results.ResultsFileError`).
+    """
     try:
-        return parse_results(raw, source=str(path))
+        return read_results_file(path, limits.results_bytes)
     except ResultsFileError as err:
         raise InvalidSubmission(str(err)) from None
-
-
-def read_results(path: str | Path, limits: SizeLimits = SizeLimits()) -> Results:
-    """Parse a results file within the size limit, refusing it as :class:`InvalidSubmission`."""
-    return _parse(_read_bytes(Path(path), limits), Path(path))
 
 
 def _refuse_subset(results: Results, path: Path) -> None:
@@ -349,6 +360,7 @@ def validate_submission(
     submission: Submission,
     suite_lookup: SuiteLookup | None = None,
     limits: SizeLimits = SizeLimits(),
+    results_file: ResultsFile | None = None,
 ) -> ValidatedSubmission:
     """Check a submission without running it (see the module docstring for the checks).
 
@@ -356,6 +368,8 @@ def validate_submission(
         submission: The submission.
         suite_lookup: ``name -> suite`` (default: ``swarmloc.bench.evaluation.suites.get_suite``).
         limits: File size limits.
+        results_file: ``submission.results_path`` as read already (:func:`read_submitted_results`);
+            read here when None. Its size is checked against ``limits`` either way.
 
     Returns:
         The validated submission, with the parsed results and the method hash.
@@ -367,8 +381,14 @@ def validate_submission(
     path = submission.results_path
     if submission.weights_path is not None:
         _file_size(submission.weights_path, "weights file", limits.weights_bytes)
-    raw = _read_bytes(path, limits)
-    results = _parse(raw, path)
+    if results_file is None:
+        results_file = read_submitted_results(path, limits)
+    elif results_file.path != Path(path):
+        raise ValueError(f"results_file is {results_file.path}, but the submission names {path}")
+    elif results_file.size > limits.results_bytes:
+        raise InvalidSubmission(f"results file {path} is {results_file.size} bytes; "
+                                f"the limit is {limits.results_bytes} bytes")
+    results = results_file.results
     _refuse_subset(results, path)
     entry = parse_entry_point(submission.entry_point)
     meta = submission.metadata
@@ -425,7 +445,7 @@ def validate_submission(
     return ValidatedSubmission(
         submission=submission,
         results=results,
-        results_text=raw.decode("utf-8"),
+        results_text=results_file.text,
         suite=suite,
         entry=entry,
         method_hash=method_hash(submission.entry_point, weights_sha, search),
@@ -476,7 +496,7 @@ __all__ = [
     "make_submission",
     "method_hash",
     "metric_problems",
+    "read_submitted_results",
     "score_problems",
-    "read_results",
     "validate_submission",
 ]

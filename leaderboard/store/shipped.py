@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarmloc.bench.evaluation.results import load_results
+from swarmloc.bench.evaluation.results import read_results_file
 from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, shipped_results
 from swarmloc.leaderboard.errors import DuplicateSubmission
 from swarmloc.leaderboard.store.database import SHIPPED_REFERENCE_METHODS, LeaderboardStore
@@ -52,12 +52,13 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
     stored, present, refused, replaced = [], [], [], []
     shipped: dict[str, dict[str, str]] = {}  # suite -> method hash -> results text of its trusted entries
     for path in shipped_results(results_dir):
-        results = load_results(path)
+        file = read_results_file(path)  # read once: compared with the store, then submitted as read
+        results = file.results
         name = results.method.name
         suite = results.suite.name
         if suite not in shipped:
             shipped[suite] = {e.method_hash: e.results_json for e in store.entries(suite) if e.trusted}
-        if path.read_text(encoding="utf-8") in shipped[suite].values():  # stored as shipped: nothing to check
+        if file.text in shipped[suite].values():  # stored as shipped: nothing to check
             present.append(name)
             continue
         if name not in SHIPPED_REFERENCE_METHODS:
@@ -67,7 +68,7 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
                     "privileged": results.method.privileged,
                     "description": f"shipped reference method {name!r}"}
         try:
-            receipt = submit(path, results.method.entry_point, metadata, trust=True, store=store,
+            receipt = submit(file, results.method.entry_point, metadata, trust=True, store=store,
                              replace_reference=True)
         except DuplicateSubmission:
             present.append(name)

@@ -13,8 +13,14 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from swarmloc.bench.evaluation.results import Results, ResultsFile
 from swarmloc.bench.scoring.stats import aggregate
 from swarmloc.leaderboard.errors import InvalidSubmission
+from swarmloc.leaderboard.store.database import (
+    SHIPPED_REFERENCE_METHODS,
+    LeaderboardEntry,
+    LeaderboardStore,
+)
 from swarmloc.leaderboard.store.records import EntryScore
 from swarmloc.leaderboard.store.schema import (
     SizeLimits,
@@ -22,13 +28,8 @@ from swarmloc.leaderboard.store.schema import (
     SuiteLookup,
     ValidatedSubmission,
     make_submission,
-    read_results,
+    read_submitted_results,
     validate_submission,
-)
-from swarmloc.leaderboard.store.database import (
-    SHIPPED_REFERENCE_METHODS,
-    LeaderboardEntry,
-    LeaderboardStore,
 )
 from swarmloc.leaderboard.verify.verification import (
     DEFAULT_RUNNER,
@@ -123,23 +124,19 @@ def build_entry(
     )
 
 
-def metadata_from_results(results_path: str | Path, overrides: SubmissionMetadata | dict[str, Any] | None = None,
-                          size_limits: SizeLimits = SizeLimits()) -> dict[str, Any]:
+def metadata_from_results(results: Results, overrides: SubmissionMetadata | dict[str, Any] | None = None
+                          ) -> dict[str, Any]:
     """Submission metadata: the results file's method name, track and privileged flag, then ``overrides``.
 
     Args:
-        results_path: Results file written by ``swarmloc evaluate``.
+        results: The submitted results (read once: :func:`~swarmloc.leaderboard.store.schema.read_submitted_results`).
         overrides: Fields given by the submitter (a :class:`SubmissionMetadata` or a
             dict; ``None`` values are ignored).
-        size_limits: Largest results file read.
 
     Returns:
         A dict of :class:`SubmissionMetadata` fields (validated later, with the rest).
-
-    Raises:
-        InvalidSubmission: the results file is missing, too large or unreadable.
     """
-    method = read_results(results_path, size_limits).method
+    method = results.method
     given = overrides.model_dump() if isinstance(overrides, SubmissionMetadata) else dict(overrides or {})
     fields = {"name": method.name, "track": method.track, "privileged": method.privileged}
     fields |= {key: value for key, value in given.items() if value is not None}
@@ -147,7 +144,7 @@ def metadata_from_results(results_path: str | Path, overrides: SubmissionMetadat
 
 
 def submit(
-    results_path: str | Path,
+    results: str | Path | ResultsFile,
     entry_point: str | None = None,
     metadata: SubmissionMetadata | dict[str, Any] | None = None,
     weights: str | Path | None = None,
@@ -172,7 +169,9 @@ def submit(
     """Validate, verify and store a submission.
 
     Args:
-        results_path: Results file written by ``swarmloc evaluate``.
+        results: Results file written by ``swarmloc evaluate``, or that file as read already
+            (:func:`~swarmloc.leaderboard.store.schema.read_submitted_results`): it is read once,
+            and every step uses that one read.
         entry_point: The method (``package.module:factory``, ``path/to/file.py:factory`` or
             a registered name); default: the results file's ``method.entry_point``.
         metadata: Name, authors, URL, description, track, privileged (a
@@ -214,10 +213,11 @@ def submit(
             did not reproduce the submitted metrics.
         DuplicateSubmission: the same method is already stored for this suite.
     """
+    file = results if isinstance(results, ResultsFile) else read_submitted_results(results, size_limits)
     if entry_point is None:
-        entry_point = read_results(results_path, size_limits).method.entry_point
-    metadata = metadata_from_results(results_path, metadata, size_limits)
-    submission = make_submission(results_path, entry_point, metadata, weights, search_path)
+        entry_point = file.results.method.entry_point
+    metadata = metadata_from_results(file.results, metadata)
+    submission = make_submission(file.path, entry_point, metadata, weights, search_path)
     if trust and entry_point not in SHIPPED_REFERENCE_METHODS:
         raise InvalidSubmission(
             f"trust=True skips verification only for the shipped reference methods "
@@ -226,7 +226,7 @@ def submit(
     if replace_reference and not trust:
         raise InvalidSubmission("replace_reference=True replaces a shipped reference method's entry; "
                                 "it needs trust=True")
-    validated = validate_submission(submission, suite_lookup, size_limits)
+    validated = validate_submission(submission, suite_lookup, size_limits, results_file=file)
     own_store = store is None
     active = store if store is not None else LeaderboardStore(db_url)
     try:
