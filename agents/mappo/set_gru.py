@@ -33,20 +33,15 @@ Run: ``swarmloc train mappo-set-gru --frames 3000000``.
 
 from __future__ import annotations
 
-import copy
-import time
 from collections.abc import Callable
-from dataclasses import asdict
-from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
 from swarmloc.envs.world.observation import N_FEATURES, VALID
 from swarmloc.envs.tasks.catalogue import get_spec
 
-from swarmloc.agents.mappo.train import TrainResult, label_loss, log_iteration, log_rollout, normalized_advantages, probe_features
+from swarmloc.agents.mappo.train import TrainingRun, TrainResult, label_loss
 from swarmloc.agents.mappo.collect import Collection
 from swarmloc.agents.mappo.config import V1_RANDOM_TASKS, SetGruConfig  # noqa: F401  (re-exported)
 from swarmloc.agents.mappo.nets import G, MaskedNormal, PendingLabels, SwarmCritic, acting_modules
@@ -112,24 +107,13 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
     Returns:
         ``TrainResult`` with the actor's state_dict.
     """
-    import numba
     from tensordict.nn import TensorDictModule
-    from torch.utils.tensorboard import SummaryWriter
     from torchrl.objectives.value import GAE
-    from tqdm import tqdm
 
-    # ---- determinism and threads
-    torch.manual_seed(cfg.seed)
-    torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
+    run = TrainingRun(cfg, writer)  # determinism and threads, run folder, TensorBoard
     # backpropagating through T GRU steps from a near-zero last layer makes denormal floats,
     # 50-70x slower on CPU; flushed to 0 they change nothing measurable
     torch.set_flush_denormal(True)
-    numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
-    run_dir = Path(cfg.run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    own_writer = writer is None
-    writer = writer or SummaryWriter(str(run_dir))
-    writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
 
     # ---- actor, acting policy, critic
     actor = SetGruActor(N_FEATURES, cfg.embed, cfg.gru_hidden, cfg.init_trust, cfg.init_log_std)
@@ -147,39 +131,20 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
     collection = Collection(cfg.tasks, cfg.num_envs, cfg.rollout_steps, cfg.seed, policy, env_kwargs,
                             check_seeds=check_seeds, threads=cfg.threads)
     envs.extend(collection.envs)
-    probe_x, probe_channels = probe_features()
-    running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
     gae = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
     gae.set_keys(value=(G, "state_value"), reward=(G, "reward"), done=(G, "done"), terminated=(G, "terminated"),
                  advantage=(G, "advantage"), value_target=(G, "value_target"))
     optimizer = torch.optim.Adam([*actor.parameters(), *critic.parameters()], lr=cfg.learning_rate)
 
-    n_iters = -(-cfg.frames // cfg.frames_per_batch)
-    frames, last_eval, next_eval, next_ckpt = 0, {}, cfg.eval_every or cfg.frames, cfg.checkpoint_every or cfg.frames
-    start = time.time()
-    bar = tqdm(total=cfg.frames, disable=not cfg.progress, unit="frame", desc="mappo-set-gru")
-    for it in range(n_iters):
-        t = it % len(cfg.tasks)
-        task = cfg.tasks[t]
+    for it, t in run.iterations("mappo-set-gru"):
         schedule = collection.schedules[t]
         recurrent.select(t, fresh=schedule.steps_done % schedule.plan.n_steps == 0)
-        if labels is not None:
-            labels.select(t)
-        tic = time.perf_counter()
-        batch = collection.collect(t)  # (B, T)
-        t_collect = time.perf_counter() - tic
+        batch = run.collect(it, collection, gae, optimizer, labels)  # (B, T), advantages set
         h0 = recurrent.h0  # (B, N, L, H): the state the batch was collected from
-        frames += batch.numel()
-        if cfg.anneal_lr:
-            optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
-        label_weight = cfg.label_weight(it, n_iters)
-
-        returns = log_rollout(writer, batch, running[t], task, frames)
-        t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
+        label_weight = cfg.label_weight(it, run.n_iters)
 
         # ---- recurrent PPO: minibatches of whole rollouts, the actor replayed from h0
-        tic = time.perf_counter()
         stats: dict[str, list[float]] = {}
         per_mb = cfg.num_envs // cfg.minibatches
         for epoch in range(cfg.epochs):
@@ -222,29 +187,7 @@ def train(cfg: SetGruConfig, evaluate: Callable[[SetGruPolicy], dict[str, float]
                         # the replay reproduces the collected log-probabilities (before any step of this batch)
                         stats["replay_log_ratio_max"] = [float(lr_.abs().max())]
         with torch.no_grad():
-            probe_mu, _ = actor.step(probe_x, actor.initial_state((probe_x.shape[0],)))
-        log_iteration(writer, bar, stats, actor.log_std.item(), torch.sigmoid(probe_mu), probe_channels,
-                      optimizer.param_groups[0]["lr"], frames, start,
-                      {"collect": t_collect, "gae": t_gae, "update": time.perf_counter() - tic}, batch.numel(), task,
-                      returns)
-
-        # ---- evaluation and checkpoints
-        final = it == n_iters - 1
-        if evaluate is not None and (frames >= next_eval or final):
-            next_eval += cfg.eval_every or cfg.frames
-            last_eval = evaluate(SetGruPolicy(copy.deepcopy(actor).eval()))
-            for key, value in last_eval.items():
-                writer.add_scalar(f"eval/{key}", value, frames)
-        if frames >= next_ckpt or final:
-            next_ckpt += cfg.checkpoint_every or cfg.frames
-            torch.save({"actor": actor.state_dict(), "critic": critic.module.state_dict(),
-                        "optimizer": optimizer.state_dict(), "frames": frames, "config": asdict(cfg)},
-                       run_dir / "checkpoint.pt")
-    bar.close()
-    collection.shutdown()
-    writer.flush()
-    if own_writer:
-        writer.close()
-    return TrainResult(actor_state={k: v.detach().clone() for k, v in actor.state_dict().items()},
-                       frames=frames, wall_time_s=time.time() - start, iterations=n_iters,
-                       episode_seeds=collection.episode_seeds(), last_eval=last_eval)
+            probe_mu, _ = actor.step(run.probe_x, actor.initial_state((run.probe_x.shape[0],)))
+        run.log_iteration(stats, actor.log_std.item(), torch.sigmoid(probe_mu), optimizer, batch.numel())
+        run.evaluate_and_checkpoint(it, actor, critic, optimizer, evaluate, SetGruPolicy)
+    return run.finish(collection, actor)

@@ -1,7 +1,8 @@
 """MAPPO link trust (madrl §2.2–2.3): CTDE training on the native batched torchrl env.
 
 CleanRL style: the configuration and the training loop are here, the torch modules in
-``mappo_nets.py``, the actor (all that evaluation needs) in ``mappo_policy.py``.
+``nets.py``, the actor (all that evaluation needs) in ``policy.py``; ``TrainingRun`` below holds the
+boilerplate that this loop and ``set_gru.py``'s share.
 
 * **Actor** (``ChannelActor``): the paper's 128–64 ReLU MLP applied to every channel of
   every UAV with the same weights. Per channel it sees that channel's F = 11 features and
@@ -26,10 +27,10 @@ CleanRL style: the configuration and the training loop are here, the torch modul
   per batch: NLOS, step NLOS, swarm sizes 2…8, cascaded faults, the ideal case. Episode
   seeds are training seeds (< 1_000_000) drawn deterministically from the run's seed.
   The collectors run here or, with ``collectors = N``, as N synchronized workers per task
-  (torchrl's ``MultiSyncCollector`` or ``RayCollector``; ``mappo_collect.py``).
+  (torchrl's ``MultiSyncCollector`` or ``RayCollector``; ``collect.py``).
 
 At execution the actor is deterministic and wrapped in adaptive Markov smoothing
-(madrl eq. 15–17), see ``mappo_policy.py``.
+(madrl eq. 15–17), see ``policy.py``.
 
 Run: ``swarmloc train mappo --frames 1000000`` (``swarmloc.bench.training.mappo``: seed checks,
 dev-seed evaluation, provenance).
@@ -39,9 +40,9 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -145,24 +146,123 @@ def label_loss(logits: torch.Tensor, fault_label: torch.Tensor, valid: torch.Ten
     return (bce * valid).sum() / valid.sum().clamp(min=1)
 
 
-def log_iteration(writer, bar, stats: dict[str, list[float]], log_std: float, probe_trust: torch.Tensor,
-                  probe_channels: dict[str, int], lr: float, frames: int, start: float,
-                  timings: dict[str, float], n_frames: int, task: str, returns: list[float]) -> None:
-    """The end of an iteration's logging: losses, log σ, the probe UAV's trust, learning rate, SPS,
-    timings and the progress bar."""
-    for key, vals in stats.items():
-        writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
-    writer.add_scalar("charts/log_std", log_std, frames)
-    for name, index in probe_channels.items():
-        writer.add_scalar(f"probe/trust_{name}", probe_trust[index].item(), frames)
-    writer.add_scalar("charts/learning_rate", lr, frames)
-    sps = frames / max(time.time() - start, 1e-9)
-    writer.add_scalar("charts/SPS", sps, frames)
-    for name, seconds in timings.items():
-        writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
-    bar.update(n_frames)
-    bar.set_postfix(task=task.removeprefix("swarmloc/")[:12], ret=f"{np.mean(returns):.1f}" if returns else "-",
-                    sps=f"{sps:.0f}")
+class TrainingRun:
+    """The boilerplate both MAPPO loops share around their PPO update (``train`` here, ``set_gru.train``).
+
+    Construction fixes determinism and threads and opens the run folder and the TensorBoard
+    writer; then ``iterations`` cycles the tasks batch by batch, ``collect`` brings in and
+    prepares each batch, ``log_iteration`` and ``evaluate_and_checkpoint`` end each
+    iteration, and ``finish`` returns the ``TrainResult``.
+
+    Args:
+        cfg: the run's configuration (``MappoConfig`` or ``SetGruConfig``).
+        writer: a TensorBoard ``SummaryWriter``, or None for one in ``cfg.run_dir`` (closed by ``finish``).
+    """
+
+    def __init__(self, cfg: MappoConfig, writer=None) -> None:
+        import numba
+        from torch.utils.tensorboard import SummaryWriter
+
+        torch.manual_seed(cfg.seed)
+        torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
+        numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
+        self.cfg = cfg
+        self.run_dir = Path(cfg.run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._own_writer = writer is None
+        self.writer = writer or SummaryWriter(str(self.run_dir))
+        self.writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
+        self.n_iters = -(-cfg.frames // cfg.frames_per_batch)
+        self.frames = 0
+        self.last_eval: dict[str, float] = {}
+        self.probe_x, self._probe_channels = probe_features()
+        self._next_eval, self._next_ckpt = cfg.eval_every or cfg.frames, cfg.checkpoint_every or cfg.frames
+        self._running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]  # partial team returns per task
+        self._task, self._returns = "", []  # the iteration's task and finished episodes' team returns
+        self._timings: dict[str, float] = {}  # the iteration's seconds: collect, gae, update
+        self._start, self._update_start, self._bar = time.time(), time.perf_counter(), None
+
+    def iterations(self, desc: str) -> Iterator[tuple[int, int]]:
+        """``(iteration, task index)`` for every iteration, the tasks in turn; starts the clock and the
+        progress bar (labelled ``desc``)."""
+        from tqdm import tqdm
+
+        self._start = time.time()
+        self._bar = tqdm(total=self.cfg.frames, disable=not self.cfg.progress, unit="frame", desc=desc)
+        for it in range(self.n_iters):
+            yield it, it % len(self.cfg.tasks)
+
+    def collect(self, it: int, collection: Collection, gae, optimizer: torch.optim.Optimizer,
+                labels: PendingLabels | None = None):
+        """Iteration ``it``'s ``(B, T)`` batch of its task, ready for the update.
+
+        The pending labels switch to the task, the batch is collected (next seeds, noise
+        block and smoother state set first), its frames counted, the learning rate annealed,
+        the rollout logged and the standardized advantages computed (``normalized_advantages``).
+        """
+        cfg = self.cfg
+        t = it % len(cfg.tasks)
+        self._task = cfg.tasks[t]
+        if labels is not None:
+            labels.select(t)
+        tic = time.perf_counter()
+        batch = collection.collect(t)
+        self._timings["collect"] = time.perf_counter() - tic
+        self.frames += batch.numel()
+        if cfg.anneal_lr:
+            optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / self.n_iters)
+        self._returns = log_rollout(self.writer, batch, self._running[t], self._task, self.frames)
+        self._timings["gae"] = normalized_advantages(batch, gae, cfg.reward_scale)
+        self._update_start = time.perf_counter()
+        return batch
+
+    def log_iteration(self, stats: dict[str, list[float]], log_std: float, probe_trust: torch.Tensor,
+                      optimizer: torch.optim.Optimizer, batch_frames: int) -> None:
+        """The end of an iteration's logging: losses, log σ, the probe UAV's trust (``probe_x``), learning
+        rate, SPS, timings and the progress bar."""
+        writer, frames = self.writer, self.frames
+        self._timings["update"] = time.perf_counter() - self._update_start
+        for key, vals in stats.items():
+            writer.add_scalar(f"losses/{key.removeprefix('loss_')}", float(np.mean(vals)), frames)
+        writer.add_scalar("charts/log_std", log_std, frames)
+        for name, index in self._probe_channels.items():
+            writer.add_scalar(f"probe/trust_{name}", probe_trust[index].item(), frames)
+        writer.add_scalar("charts/learning_rate", optimizer.param_groups[0]["lr"], frames)
+        sps = frames / max(time.time() - self._start, 1e-9)
+        writer.add_scalar("charts/SPS", sps, frames)
+        for name, seconds in self._timings.items():
+            writer.add_scalar(f"charts/time_{name}_s", seconds, frames)
+        self._bar.update(batch_frames)
+        self._bar.set_postfix(task=self._task.removeprefix("swarmloc/")[:12],
+                              ret=f"{np.mean(self._returns):.1f}" if self._returns else "-", sps=f"{sps:.0f}")
+
+    def evaluate_and_checkpoint(self, it: int, actor: torch.nn.Module, critic, optimizer: torch.optim.Optimizer,
+                                evaluate: Callable | None, policy: Callable[[torch.nn.Module], object]) -> None:
+        """Every ``eval_every`` frames and after the last iteration, ``evaluate`` a deterministic, unsmoothed
+        ``policy(copy of actor)`` (logged under ``eval/``); every ``checkpoint_every`` frames and after the last
+        iteration, save actor, critic and optimizer to ``run_dir/checkpoint.pt``."""
+        cfg, final = self.cfg, it == self.n_iters - 1
+        if evaluate is not None and (self.frames >= self._next_eval or final):
+            self._next_eval += cfg.eval_every or cfg.frames
+            self.last_eval = evaluate(policy(copy.deepcopy(actor).eval()))
+            for key, value in self.last_eval.items():
+                self.writer.add_scalar(f"eval/{key}", value, self.frames)
+        if self.frames >= self._next_ckpt or final:
+            self._next_ckpt += cfg.checkpoint_every or cfg.frames
+            torch.save({"actor": actor.state_dict(), "critic": critic.module.state_dict(),
+                        "optimizer": optimizer.state_dict(), "frames": self.frames, "config": asdict(cfg)},
+                       self.run_dir / "checkpoint.pt")
+
+    def finish(self, collection: Collection, actor: torch.nn.Module) -> TrainResult:
+        """Close the progress bar, the collectors and the writer (if the run opened it); the run's result."""
+        self._bar.close()
+        collection.shutdown()
+        self.writer.flush()
+        if self._own_writer:
+            self.writer.close()
+        return TrainResult(actor_state={k: v.detach().clone() for k, v in actor.state_dict().items()},
+                           frames=self.frames, wall_time_s=time.time() - self._start, iterations=self.n_iters,
+                           episode_seeds=collection.episode_seeds(), last_eval=self.last_eval)
 
 
 def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] | None = None,
@@ -181,22 +281,11 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     Returns:
         ``TrainResult`` with the actor's state_dict.
     """
-    import numba
-    from torch.utils.tensorboard import SummaryWriter
     from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
     from torchrl.objectives import ClipPPOLoss
     from torchrl.objectives.value import GAE
-    from tqdm import tqdm
 
-    # ---- determinism and threads
-    torch.manual_seed(cfg.seed)
-    torch.set_num_threads(1)  # portable bit-identity: see MappoConfig.threads
-    numba.set_num_threads(min(cfg.threads, numba.config.NUMBA_NUM_THREADS))
-    run_dir = Path(cfg.run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    own_writer = writer is None
-    writer = writer or SummaryWriter(str(run_dir))
-    writer.add_text("config", "\n".join(f"- {k}: {v}" for k, v in asdict(cfg).items()))
+    run = TrainingRun(cfg, writer)  # determinism and threads, run folder, TensorBoard
 
     envs: list = []  # the collectors' envs, for the privileged labels (filled once they are built)
     labels = PendingLabels(envs) if cfg.label_coef > 0 else None
@@ -210,8 +299,6 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                             collectors=cfg.collectors, backend=cfg.backend, address=cfg.address,
                             check_seeds=check_seeds, threads=cfg.threads)
     envs.extend(collection.envs)
-    probe_x, probe_channels = probe_features()
-    running = [np.zeros(cfg.num_envs) for _ in cfg.tasks]
 
     # ---- PPO pieces
     loss = ClipPPOLoss(prob_actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_bonus=True,
@@ -228,28 +315,11 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
     replays = [ReplayBuffer(storage=LazyTensorStorage(cfg.frames_per_batch), sampler=SamplerWithoutReplacement(),
                             batch_size=cfg.frames_per_batch // cfg.minibatches) for _ in cfg.tasks]
 
-    n_iters = -(-cfg.frames // cfg.frames_per_batch)
-    frames, last_eval, next_eval, next_ckpt = 0, {}, cfg.eval_every or cfg.frames, cfg.checkpoint_every or cfg.frames
-    start = time.time()
-    bar = tqdm(total=cfg.frames, disable=not cfg.progress, unit="frame", desc="mappo")
-    for it in range(n_iters):
-        t = it % len(cfg.tasks)
-        task = cfg.tasks[t]
-        if labels is not None:
-            labels.select(t)
-        tic = time.perf_counter()
-        batch = collection.collect(t)  # (B, T): next seeds, noise block and smoother state set first
-        t_collect = time.perf_counter() - tic
-        frames += batch.numel()
-        if cfg.anneal_lr:
-            optimizer.param_groups[0]["lr"] = cfg.learning_rate * (1.0 - it / n_iters)
-        label_weight = cfg.label_weight(it, n_iters)
-
-        returns = log_rollout(writer, batch, running[t], task, frames)
-        t_gae = normalized_advantages(batch, gae, cfg.reward_scale)
+    for it, t in run.iterations("mappo"):
+        batch = run.collect(it, collection, gae, optimizer, labels)  # (B, T), advantages set
+        label_weight = cfg.label_weight(it, run.n_iters)
 
         # ---- PPO epochs over minibatches
-        tic = time.perf_counter()
         replay = replays[t]
         replay.extend(batch.reshape(-1))
         stats: dict[str, list[float]] = {}
@@ -273,30 +343,7 @@ def train(cfg: MappoConfig, evaluate: Callable[[MappoPolicy], dict[str, float]] 
                     if key in out.keys():
                         stats.setdefault(key, []).append(float(out[key].detach().mean()))
         with torch.no_grad():
-            probe_trust = actor_net.trust(probe_x)
-        log_iteration(writer, bar, stats, actor_net.log_std.item(), probe_trust, probe_channels,
-                      optimizer.param_groups[0]["lr"], frames, start,
-                      {"collect": t_collect, "gae": t_gae, "update": time.perf_counter() - tic}, batch.numel(), task,
-                      returns)
-
-        # ---- evaluation and checkpoints
-        final = it == n_iters - 1
-        if evaluate is not None and (frames >= next_eval or final):
-            next_eval += cfg.eval_every or cfg.frames
-            last_eval = evaluate(MappoPolicy(copy.deepcopy(actor_net).eval()))
-            for key, value in last_eval.items():
-                writer.add_scalar(f"eval/{key}", value, frames)
-        if frames >= next_ckpt or final:
-            next_ckpt += cfg.checkpoint_every or cfg.frames
-            torch.save({"actor": actor_net.state_dict(), "critic": critic.module.state_dict(),
-                        "optimizer": optimizer.state_dict(), "frames": frames, "config": asdict(cfg)},
-                       run_dir / "checkpoint.pt")
-    bar.close()
-    collection.shutdown()
-    writer.flush()
-    if own_writer:
-        writer.close()
-    seeds = collection.episode_seeds()
-    return TrainResult(actor_state={k: v.detach().clone() for k, v in actor_net.state_dict().items()},
-                       frames=frames, wall_time_s=time.time() - start, iterations=n_iters, episode_seeds=seeds,
-                       last_eval=last_eval)
+            probe_trust = actor_net.trust(run.probe_x)
+        run.log_iteration(stats, actor_net.log_std.item(), probe_trust, optimizer, batch.numel())
+        run.evaluate_and_checkpoint(it, actor_net, critic, optimizer, evaluate, MappoPolicy)
+    return run.finish(collection, actor_net)
