@@ -49,6 +49,27 @@ from swarmloc.agents.trust.smoothing import BETA_MAX, SMOOTHING_GAMMA, MarkovSmo
 LOGIT_LIMIT = 8.0
 
 
+def limit_logit(raw: torch.Tensor) -> torch.Tensor:
+    """The trust logit μ = c · tanh(raw / c), c = ``LOGIT_LIMIT``: a smooth limit that keeps gradients (a clamp
+    would not)."""
+    return LOGIT_LIMIT * torch.tanh(raw / LOGIT_LIMIT)
+
+
+def trust_output_layer(width: int, init_trust: float) -> nn.Linear:
+    """A trust actor's last layer, ``width`` → one logit, initialized so that the untrained actor starts near
+    α = ``init_trust`` everywhere (small weights, bias logit(init_trust)).
+
+    Raises:
+        ValueError: ``init_trust`` not in (0, 1).
+    """
+    if not 0.0 < init_trust < 1.0:
+        raise ValueError(f"init_trust must be in (0, 1), got {init_trust!r}")
+    last = nn.Linear(width, 1)
+    nn.init.uniform_(last.weight, -1e-3, 1e-3)
+    nn.init.constant_(last.bias, float(np.log(init_trust / (1.0 - init_trust))))
+    return last
+
+
 #: per-UAV context appended to every channel: masked means of these features over the UAV's
 #: present channels (innovation, NIS) — how this link compares with the UAV's other links
 CONTEXT_FEATURES = (INNOVATION, NIS)
@@ -90,18 +111,12 @@ class ChannelActor(nn.Module):
     def __init__(self, n_features: int = N_FEATURES, hidden: tuple[int, ...] = (128, 64), init_trust: float = 0.8,
                  init_log_std: float = -0.5, context: bool = True) -> None:
         super().__init__()
-        if not 0.0 < init_trust < 1.0:
-            raise ValueError(f"init_trust must be in (0, 1), got {init_trust!r}")
         layers: list[nn.Module] = []
         width = n_features + (len(CONTEXT_FEATURES) if context else 0)
         for h in hidden:
             layers += [nn.Linear(width, h), nn.ReLU()]
             width = h
-        head = nn.Linear(width, 1)
-        # a small last layer: the untrained actor starts near α = init_trust everywhere
-        nn.init.uniform_(head.weight, -1e-3, 1e-3)
-        nn.init.constant_(head.bias, float(np.log(init_trust / (1.0 - init_trust))))
-        self.body = nn.Sequential(*layers, head)
+        self.body = nn.Sequential(*layers, trust_output_layer(width, init_trust))
         self.log_std = nn.Parameter(torch.tensor(float(init_log_std)))
         # a buffer, so that the weights file says which input the network expects
         self.register_buffer("context", torch.tensor(bool(context)))
@@ -112,9 +127,7 @@ class ChannelActor(nn.Module):
         if obs.ndim < 2 or obs.shape[-1] != self.n_features:
             raise ValueError(f"obs must have shape (..., L, F = {self.n_features}), got {tuple(obs.shape)}")
         x = torch.cat([obs, channel_context(obs)], dim=-1) if bool(self.context) else obs
-        raw = self.body(x).squeeze(-1)
-        # μ = c · tanh(raw / c): a smooth limit that keeps gradients, unlike a clamp
-        return LOGIT_LIMIT * torch.tanh(raw / LOGIT_LIMIT)
+        return limit_logit(self.body(x).squeeze(-1))
 
     def trust(self, obs: torch.Tensor) -> torch.Tensor:
         """Deterministic α_raw = sigmoid(μ) ``(..., L)`` in (0, 1)."""
@@ -133,32 +146,31 @@ def hidden_sizes(state_dict: dict[str, torch.Tensor]) -> tuple[int, ...]:
     return tuple(widths[:-1])
 
 
-def read_state_dict(path: Path, missing: str, keys: tuple[str, ...], wrong: str) -> dict[str, torch.Tensor]:
-    """A plain state_dict file's tensors (CPU, ``weights_only``).
+def read_state_dict(weights: str | Path, method: str, network: str, keys: tuple[str, ...]) -> dict[str, torch.Tensor]:
+    """The tensors of a plain state_dict file (``torch.save(actor.state_dict())``) of ``method``'s ``network``,
+    on the CPU (``weights_only``).
 
     Raises:
-        FileNotFoundError: no such file (``missing`` says how to train one).
-        ValueError: not a dict holding every one of ``keys`` (``wrong`` says what was expected).
+        FileNotFoundError: no such file (the message says how to train one: ``swarmloc train <method>``).
+        ValueError: not a dict holding every one of ``keys``.
     """
+    path = Path(weights)
     if not path.is_file():
-        raise FileNotFoundError(missing)
+        raise FileNotFoundError(f"{method} weights {path} not found; train them with "
+                                f"`swarmloc train {method} --weights-out {path}`")
     state = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(state, dict) or any(k not in state for k in keys):
-        raise ValueError(wrong)
+        raise ValueError(f"{path} is not a {network} state_dict (expected the keys {', '.join(keys)})")
     return state
 
 
 def load_actor(weights: str | Path) -> ChannelActor:
-    """A ``ChannelActor`` from a plain state_dict file (``torch.save(actor.state_dict())``).
+    """A ``ChannelActor`` from a plain state_dict file (widths and input read from the tensors).
 
     Raises:
-        FileNotFoundError: no such file (the message says how to train one).
-        ValueError: the file is not a ChannelActor state_dict.
+        FileNotFoundError, ValueError: see ``read_state_dict``.
     """
-    path = Path(weights)
-    state = read_state_dict(path, f"MAPPO weights {path} not found; train them with "
-                                  f"`swarmloc train mappo --weights-out {path}` (see agents/weights/mappo.json)",
-                            ("body.0.weight",), f"{path} is not a ChannelActor state_dict (expected keys body.*, log_std)")
+    state = read_state_dict(weights, "mappo", "ChannelActor", ("body.0.weight",))
     # weights from before the context input carry no flag: they are purely per-channel
     state.setdefault("context", torch.tensor(False))
     context = bool(state["context"])
@@ -206,6 +218,28 @@ def weights_kinds(weights: str | Path) -> np.ndarray | None:
     return trained_kinds(tasks) if tasks else None
 
 
+def kinds_mask(kinds: np.ndarray | None) -> np.ndarray:
+    """The ``(N_KINDS,)`` bool mask of the channel kinds a learned actor decides; None: every kind.
+
+    Raises:
+        ValueError: not one flag per channel kind.
+    """
+    kinds = np.ones(N_KINDS, dtype=bool) if kinds is None else np.asarray(kinds, dtype=bool)
+    if kinds.shape != (N_KINDS,):
+        raise ValueError(f"kinds must be a ({N_KINDS},) bool mask over the channel kinds, got shape {kinds.shape}")
+    return kinds
+
+
+def decided_trust(alpha: torch.Tensor, obs: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+    """The actor's α ``(B, N, L)`` (float64) on the channels it decides, the nominal trust 1 elsewhere.
+
+    Absent channels are skipped by the CEKF anyway, and a channel of a kind the actor was
+    not trained on (``kinds`` False) gets the plain CEKF's trust: report 1 on both.
+    """
+    decided = (obs[..., VALID] > 0.5) & (obs[..., KIND0:KIND0 + N_KINDS] @ kinds.astype(np.float32) > 0.5)
+    return np.where(decided, alpha.numpy().astype(np.float64), 1.0)
+
+
 class MappoPolicy:
     """The trained MAPPO actor as a ``LinkTrustPolicy`` (numpy in, numpy out).
 
@@ -233,12 +267,7 @@ class MappoPolicy:
     def __init__(self, actor: ChannelActor, isolation: bool = True, kinds: np.ndarray | None = None) -> None:
         self.actor = actor.eval()
         self.isolation = bool(isolation)
-        if kinds is None:
-            kinds = np.ones(N_KINDS, dtype=bool)
-        kinds = np.asarray(kinds, dtype=bool)
-        if kinds.shape != (N_KINDS,):
-            raise ValueError(f"kinds must be a ({N_KINDS},) bool mask over the channel kinds, got shape {kinds.shape}")
-        self.kinds = kinds
+        self.kinds = kinds_mask(kinds)
         self.flops_per_channel = count_flops_per_channel(actor) if self.isolation else 0.0
         self._shape: tuple[int, int, int] = (0, 0, 0)
 
@@ -258,11 +287,7 @@ class MappoPolicy:
         with torch.no_grad():
             # a copy: the caller's buffers are read-only views that it reuses
             alpha = self.actor.trust(torch.tensor(obs, dtype=torch.float32))
-        out = alpha.numpy().astype(np.float64)
-        # absent channels are skipped by the CEKF anyway, and kinds the actor was not
-        # trained on get the nominal trust: report full trust there
-        decided = (obs[..., VALID] > 0.5) & (obs[..., KIND0:KIND0 + N_KINDS] @ self.kinds.astype(np.float32) > 0.5)
-        return np.where(decided, out, 1.0)
+        return decided_trust(alpha, obs, self.kinds)
 
     def __repr__(self) -> str:
         return (f"MappoPolicy(isolation={self.isolation}, kinds={self.kinds.astype(int).tolist()}, "

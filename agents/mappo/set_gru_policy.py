@@ -37,10 +37,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from swarmloc.envs.tasks.channels import N_KINDS, ChannelLayout
-from swarmloc.envs.world.observation import KIND0, N_FEATURES, VALID
+from swarmloc.envs.tasks.channels import ChannelLayout
+from swarmloc.envs.world.observation import N_FEATURES, VALID
 
-from swarmloc.agents.mappo.policy import LOGIT_LIMIT, read_state_dict, weights_kinds
+from swarmloc.agents.mappo.policy import (
+    decided_trust,
+    kinds_mask,
+    limit_logit,
+    read_state_dict,
+    trust_output_layer,
+    weights_kinds,
+)
 from swarmloc.agents.protocols import TrustInput
 from swarmloc.agents.registry import WEIGHTS_DIR
 
@@ -73,17 +80,12 @@ class SetGruActor(nn.Module):
     def __init__(self, n_features: int = N_FEATURES, embed: int = 64, hidden: int = 64, init_trust: float = 0.5,
                  init_log_std: float = 0.7) -> None:
         super().__init__()
-        if not 0.0 < init_trust < 1.0:
-            raise ValueError(f"init_trust must be in (0, 1), got {init_trust!r}")
         if embed < 1 or hidden < 1:
             raise ValueError(f"embed and hidden must be >= 1, got {embed}, {hidden}")
         self.n_features, self.embed, self.hidden = n_features, embed, hidden
         self.encode = nn.Sequential(nn.Linear(n_features, embed), nn.ReLU(), nn.Linear(embed, embed), nn.ReLU())
         self.gru = nn.GRUCell(3 * embed, hidden)
-        last = nn.Linear(embed, 1)
-        # a small last layer: the untrained actor starts near α = init_trust everywhere
-        nn.init.uniform_(last.weight, -1e-3, 1e-3)
-        nn.init.constant_(last.bias, float(np.log(init_trust / (1.0 - init_trust))))
+        last = trust_output_layer(embed, init_trust)
         self.head = nn.Sequential(nn.Linear(2 * hidden + 3 * embed, embed), nn.ReLU(), last)
         self.log_std = nn.Parameter(torch.tensor(float(init_log_std)))
 
@@ -109,9 +111,7 @@ class SetGruActor(nn.Module):
         h_new = self.gru(x.reshape(-1, x.shape[-1]), h.reshape(-1, self.hidden)).reshape(h.shape)
         h_new = torch.where(valid > 0.5, h_new, h)  # an absent channel keeps its memory
         h_mean = (h_new * valid).sum(-2, keepdim=True) / valid.sum(-2, keepdim=True).clamp(min=1.0)
-        raw = self.head(torch.cat([h_new, h_mean.expand_as(h_new), x], dim=-1)).squeeze(-1)
-        # μ = c · tanh(raw / c): a smooth limit that keeps gradients, unlike a clamp
-        return LOGIT_LIMIT * torch.tanh(raw / LOGIT_LIMIT), h_new
+        return limit_logit(self.head(torch.cat([h_new, h_mean.expand_as(h_new), x], dim=-1)).squeeze(-1)), h_new
 
     def sequence(self, obs: torch.Tensor, h0: torch.Tensor) -> torch.Tensor:
         """Logits ``(B, T, ..., L)`` of whole rollouts ``(B, T, ..., L, F)`` from ``h0`` ``(B, ..., L, H)``."""
@@ -126,13 +126,9 @@ def load_set_gru_actor(weights: str | Path) -> SetGruActor:
     """A ``SetGruActor`` from a plain state_dict file (widths read from the tensors' shapes).
 
     Raises:
-        FileNotFoundError: no such file (the message says how to train one).
-        ValueError: the file is not a SetGruActor state_dict.
+        FileNotFoundError, ValueError: see ``read_state_dict``.
     """
-    path = Path(weights)
-    state = read_state_dict(path, f"mappo-set-gru weights {path} not found; train them with "
-                                  f"`swarmloc train mappo-set-gru --weights-out {path}`", ("gru.weight_hh", "encode.0.weight"),
-                            f"{path} is not a SetGruActor state_dict (expected keys encode.*, gru.*, head.*, log_std)")
+    state = read_state_dict(weights, "mappo-set-gru", "SetGruActor", ("gru.weight_hh", "encode.0.weight"))
     embed, n_features = state["encode.0.weight"].shape
     actor = SetGruActor(n_features=int(n_features), embed=int(embed), hidden=int(state["gru.weight_hh"].shape[1]))
     actor.load_state_dict(state)
@@ -166,9 +162,8 @@ class SetGruPolicy:
         kinds: ``(N_KINDS,)`` bool, the channel kinds the actor decides (default: all).
 
     Attributes:
-        privileged: False (reads only the observation).
-        deterministic: True (the mean logit, no sampling).
-        flops_per_channel: FLOPs of the network per present channel per step.
+        privileged, deterministic, flops_per_channel: as for ``MappoPolicy`` (False, True, the
+            network's FLOPs per present channel per step).
     """
 
     privileged = False
@@ -176,10 +171,7 @@ class SetGruPolicy:
 
     def __init__(self, actor: SetGruActor, kinds: np.ndarray | None = None) -> None:
         self.actor = actor.eval()
-        kinds = np.ones(N_KINDS, dtype=bool) if kinds is None else np.asarray(kinds, dtype=bool)
-        if kinds.shape != (N_KINDS,):
-            raise ValueError(f"kinds must be a ({N_KINDS},) bool mask over the channel kinds, got shape {kinds.shape}")
-        self.kinds = kinds
+        self.kinds = kinds_mask(kinds)
         self.flops_per_channel = count_flops_per_channel(actor)
         self._h: torch.Tensor | None = None
 
@@ -200,9 +192,7 @@ class SetGruPolicy:
         with torch.no_grad():
             # a copy: the caller's buffers are read-only views that it reuses
             mu, self._h = self.actor.step(torch.tensor(obs, dtype=torch.float32), self._h)
-        out = torch.sigmoid(mu).numpy().astype(np.float64)
-        decided = (obs[..., VALID] > 0.5) & (obs[..., KIND0:KIND0 + N_KINDS] @ self.kinds.astype(np.float32) > 0.5)
-        return np.where(decided, out, 1.0)
+        return decided_trust(torch.sigmoid(mu), obs, self.kinds)
 
     def __repr__(self) -> str:
         return (f"SetGruPolicy(embed={self.actor.embed}, hidden={self.actor.hidden}, "
