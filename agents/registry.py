@@ -50,17 +50,17 @@ class MethodEntry:
         name: registry name.
         factory: ``module:attr`` of a zero-argument callable returning the method.
         track: ``"A"`` (link trust in the env's CEKF) or ``"B"`` (full estimator).
+        summary: one line for tables and ``--help``.
         privileged: reads fault labels (shown apart, never ranked).
         deterministic: re-running an episode reproduces it exactly.
-        summary: one line for tables and ``--help``.
     """
 
     name: str
     factory: str
     track: Track
-    privileged: bool
-    deterministic: bool
     summary: str
+    privileged: bool = False
+    deterministic: bool = True
 
 
 _A = "swarmloc.agents.trust.classical"
@@ -68,54 +68,52 @@ _M = "swarmloc.agents.mappo.policy"
 _P = "swarmloc.agents.estimators.pf.filters"
 #: every shipped method, in display order
 REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
-    MethodEntry("uniform", f"{_A}:uniform_policy", "A", False, True, "standard CEKF, α = 1 (score 0)"),
-    MethodEntry("fixed", f"{_A}:fixed_policy", "A", False, True, "fixed trust α = 0.6 (madrl Exp. 3)"),
-    MethodEntry("huber", f"{_A}:huber_policy", "A", False, True, "Huber weight of √NIS, k = 1.345"),
-    MethodEntry("chi2-gate", f"{_A}:chi2_gate_policy", "A", False, True, "hard χ²₀.₉₅ gate, α_min beyond"),
-    MethodEntry("chi2-soft", f"{_A}:chi2_soft_policy", "A", False, True, "exp. down-weighting past χ²₀.₉₅ (dtvirm)"),
-    MethodEntry("federated-coef", f"{_A}:federated_coef_policy", "A", False, True,
+    MethodEntry("uniform", f"{_A}:uniform_policy", "A", "standard CEKF, α = 1 (score 0)"),
+    MethodEntry("fixed", f"{_A}:fixed_policy", "A", "fixed trust α = 0.6 (madrl Exp. 3)"),
+    MethodEntry("huber", f"{_A}:huber_policy", "A", "Huber weight of √NIS, k = 1.345"),
+    MethodEntry("chi2-gate", f"{_A}:chi2_gate_policy", "A", "hard χ²₀.₉₅ gate, α_min beyond"),
+    MethodEntry("chi2-soft", f"{_A}:chi2_soft_policy", "A", "exp. down-weighting past χ²₀.₉₅ (dtvirm)"),
+    MethodEntry("federated-coef", f"{_A}:federated_coef_policy", "A",
                 "information-allocation coefficient (federated eq. 17–21)"),
-    MethodEntry("cusum", "swarmloc.agents.trust.integrity:cusum_policy", "A", False, True,
+    MethodEntry("cusum", "swarmloc.agents.trust.integrity:cusum_policy", "A",
                 "CUSUM per channel on the NIS (λ = 4, ARL₀ = 10⁴), readmits on a reverse CUSUM"),
-    MethodEntry("raim", "swarmloc.agents.trust.integrity:raim_policy", "A", False, True,
+    MethodEntry("raim", "swarmloc.agents.trust.integrity:raim_policy", "A",
                 "RAIM per UAV: Σ NIS vs χ²₀.₉₉₉, leave-one-out exclusion up to a minority"),
-    MethodEntry("non-cooperative", f"{_A}:non_cooperative_policy", "A", False, True,
+    MethodEntry("non-cooperative", f"{_A}:non_cooperative_policy", "A",
                 "each UAV alone: peer channels skipped, absolute ones trusted (a shortcut probe)"),
-    MethodEntry("random", f"{_A}:random_policy", "A", False, True, "α ~ U(0, 1), seeded (the floor)"),
-    MethodEntry("dead-reckoning", "swarmloc.agents.estimators.dead_reckoning:dead_reckoning", "B", False, True,
+    MethodEntry("random", f"{_A}:random_policy", "A", "α ~ U(0, 1), seeded (the floor)"),
+    MethodEntry("dead-reckoning", "swarmloc.agents.estimators.dead_reckoning:dead_reckoning", "B",
                 "IMU only from the initial prior"),
-    MethodEntry("imm-kf", "swarmloc.agents.estimators.imm:imm_kf", "B", False, True,
+    MethodEntry("imm-kf", "swarmloc.agents.estimators.imm:imm_kf", "B",
                 "IMM (CV, CT±) Kalman filter on GPS fixes (imm-arkf Table 1)"),
-    MethodEntry("imm-ekf", "swarmloc.agents.estimators.imm:imm_ekf", "B", False, True,
+    MethodEntry("imm-ekf", "swarmloc.agents.estimators.imm:imm_ekf", "B",
                 "IMM (CV, CT±) EKF on range/bearing of the fix (imm-arkf Table 1)"),
-    MethodEntry("imm-arkf", "swarmloc.agents.estimators.imm:imm_arkf", "B", False, True,
+    MethodEntry("imm-arkf", "swarmloc.agents.estimators.imm:imm_arkf", "B",
                 "IMM adaptive robust KF: correntropy weights + χ² fading factor (imm-arkf §2.3)"),
-    MethodEntry("federated", "swarmloc.agents.estimators.federated:federated", "B", False, True,
+    MethodEntry("federated", "swarmloc.agents.estimators.federated:federated", "B",
                 "adaptive fault-tolerant federated filter (federated §4)"),
-    MethodEntry("federated-fdi", "swarmloc.agents.estimators.federated:federated_fdi", "B", False, True,
+    MethodEntry("federated-fdi", "swarmloc.agents.estimators.federated:federated_fdi", "B",
                 "federated filter, equal allocation + χ² FDI only (federated Scheme 2)"),
-    MethodEntry("ci-ekf", "swarmloc.agents.estimators.ci_ekf:ci_ekf", "B", False, True,
+    MethodEntry("ci-ekf", "swarmloc.agents.estimators.ci_ekf:ci_ekf", "B",
                 "anchor-free CI-EKF + χ² UWB adaptive adjustment, MDS-MAP init (dtvirm)"),
-    MethodEntry("ci-ekf-no-aa", "swarmloc.agents.estimators.ci_ekf:ci_ekf_no_aa", "B", False, True,
+    MethodEntry("ci-ekf-no-aa", "swarmloc.agents.estimators.ci_ekf:ci_ekf_no_aa", "B",
                 "CI-EKF without the UWB adaptive adjustment (dtvirm ablation)"),
-    MethodEntry("pf", f"{_P}:make_pf", "B", False, True, "particle filter, 500 particles (pf-nn Table 4)"),
-    MethodEntry("pf-800", f"{_P}:make_pf800", "B", False, True, "particle filter, 800 particles"),
-    MethodEntry("adaptive-pf", f"{_P}:make_adaptive_pf", "B", False, True,
-                "ESS-adaptive particle count in [100, 800] (pf-nn §3.3)"),
-    MethodEntry("pf-nn", f"{_P}:make_pfnn", "B", False, True,
+    MethodEntry("pf", f"{_P}:make_pf", "B", "particle filter, 500 particles (pf-nn Table 4)"),
+    MethodEntry("pf-800", f"{_P}:make_pf800", "B", "particle filter, 800 particles"),
+    MethodEntry("adaptive-pf", f"{_P}:make_adaptive_pf", "B", "ESS-adaptive particle count in [100, 800] (pf-nn §3.3)"),
+    MethodEntry("pf-nn", f"{_P}:make_pfnn", "B",
                 "adaptive PF + 6–12–1 weight-correcting network, trained offline (pf-nn §3.4)"),
-    MethodEntry("mappo", f"{_M}:mappo", "A", False, True,
+    MethodEntry("mappo", f"{_M}:mappo", "A",
                 "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing"),
-    MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", False, True,
-                "MAPPO, raw α without smoothing (madrl Exp. 6)"),
-    MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A", False, True,
+    MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", "MAPPO, raw α without smoothing (madrl Exp. 6)"),
+    MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A",
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
-    MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A", False, True,
+    MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A",
                 "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
-    MethodEntry("mappo-set-gru", "swarmloc.agents.mappo.set_gru_policy:mappo_set_gru", "A", False, True,
+    MethodEntry("mappo-set-gru", "swarmloc.agents.mappo.set_gru_policy:mappo_set_gru", "A",
                 "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
-    MethodEntry("oracle", f"{_A}:oracle_policy", "A", True, True,
-                "privileged: α_min on channels with an error label (the trust ceiling)"),
+    MethodEntry("oracle", f"{_A}:oracle_policy", "A",
+                "privileged: α_min on channels with an error label (the trust ceiling)", privileged=True),
 )}
 
 #: the reference of the score: every episode's gain is log2(RMSE of uniform / RMSE) on the same episode
