@@ -15,6 +15,19 @@ from swarmloc.envs.world.cost import PREDICT_FLOPS
 from swarmloc.agents.protocols import EstimatorOutput, Measurements, TaskFacts
 
 
+def cekf_prior(facts: TaskFacts, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The CEKF backbone's start: the mean ``x`` ``(B, N, 6)`` (a float64 copy of the prior ``x0``) and the
+    covariance ``P`` ``(B, N, 6, 6)`` of the task's stated initial std (also ``TrustEstimator``'s start).
+
+    Raises:
+        ValueError: ``x0`` is not ``(B, N, 6)``.
+    """
+    n_b, n = facts.batch_size, facts.n_uav
+    if np.shape(x0) != (n_b, n, 6):
+        raise ValueError(f"x0 must have shape (B, N, 6) = {(n_b, n, 6)}, got {np.shape(x0)}")
+    return np.array(x0, dtype=np.float64), cekf.initial_covariance(n_b, n, facts.init_pos_sigma, facts.init_vel_sigma)
+
+
 class DeadReckoning:
     """IMU dead reckoning from the initial prior mean (no channel is ever used)."""
 
@@ -26,12 +39,9 @@ class DeadReckoning:
 
     def reset(self, facts: TaskFacts, x0: np.ndarray) -> None:
         """Start B episodes at the prior ``x0`` ``(B, N, 6)`` with the stated initial std."""
-        n_b, n = facts.batch_size, facts.n_uav
-        if np.shape(x0) != (n_b, n, 6):
-            raise ValueError(f"x0 must have shape (B, N, 6) = {(n_b, n, 6)}, got {np.shape(x0)}")
+        self.x, self.P = cekf_prior(facts, x0)
         self._facts = facts
-        self.x = np.array(x0, dtype=np.float64)
-        self.P = cekf.initial_covariance(n_b, n, facts.init_pos_sigma, facts.init_vel_sigma)
+        n_b, n = facts.batch_size, facts.n_uav
         self._prior_pos = np.zeros((n_b, n, 3))
         self._flops = np.full((n_b, n), float(PREDICT_FLOPS))
 

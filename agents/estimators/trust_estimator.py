@@ -18,6 +18,7 @@ import numpy as np
 from swarmloc.envs.filter import cekf
 from swarmloc.envs.world.observation import N_FEATURES, build_observation, kind_one_hot
 
+from swarmloc.agents.estimators.dead_reckoning import cekf_prior
 from swarmloc.agents.protocols import EstimatorOutput, LinkTrustPolicy, Measurements, PrivilegedInfo, TaskFacts, TrustInput
 
 
@@ -53,12 +54,9 @@ class TrustEstimator:
 
     def reset(self, facts: TaskFacts, x0: np.ndarray) -> None:
         """Start B episodes from the prior ``x0`` ``(B, N, 6)`` with the stated initial std."""
-        n_b, n, n_l = facts.batch_size, facts.n_uav, facts.n_channels
-        if np.shape(x0) != (n_b, n, 6):
-            raise ValueError(f"x0 must have shape (B, N, 6) = {(n_b, n, 6)}, got {np.shape(x0)}")
+        self.x, self.P = cekf_prior(facts, x0)
         self._facts = facts
-        self.x = np.array(x0, dtype=np.float64)
-        self.P = cekf.initial_covariance(n_b, n, facts.init_pos_sigma, facts.init_vel_sigma)
+        n_b, n, n_l = facts.batch_size, facts.n_uav, facts.n_channels
         self._prior_pos = np.zeros((n_b, n, 3))
         self._prev_imu = np.zeros((n_b, n, 3))
         self._r0 = np.ascontiguousarray(facts.sigma**2)

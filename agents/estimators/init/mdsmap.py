@@ -93,6 +93,12 @@ class InitProblem:
         """K, the number of node-0 moves."""
         return self.track.shape[-2] - 1
 
+    def positions(self, x_h: FloatArray) -> FloatArray:
+        """ENU positions ``(..., N, 3)`` [m] from horizontal ones ``(B, N, 2)``: the known altitudes
+        appended, the caller's leading shape restored."""
+        N = self.n_nodes
+        return np.concatenate([x_h, self.z[:, :N, None]], axis=-1).reshape(self.lead + (N, 3))
+
 
 def _check_ranges(name: str, D: FloatArray) -> None:
     bad = ~(np.isnan(D) | (np.isfinite(D) & (D >= 0.0)))
@@ -354,13 +360,7 @@ def _layout_algorithm2(H: FloatArray, N: int, K: int) -> tuple[FloatArray, Float
 def _layout_joint(H: FloatArray, N: int, K: int) -> tuple[FloatArray, FloatArray]:
     """One MDS layout of the augmented points (the N nodes and node 0's K track points).
 
-    Args:
-        H: (B, M, M) horizontal distances over the augmented points, NaN = missing.
-        N: number of UAVs.
-        K: number of moves.
-
-    Returns:
-        Y: (B, N, 2) the node layout; T: (B, K+1, 2) node 0's track in that layout.
+    Arguments and returns as ``_layout_algorithm2``.
     """
     Z = classical_mds(complete_distances(H) ** 2, dim=2)  # (B, M, 2)
     return Z[:, :N], Z[:, np.concatenate([[0], np.arange(N, N + K)])]
@@ -432,7 +432,4 @@ def mdsmap_init(
     X_free = Y @ Q_free.swapaxes(1, 2)
     rot_matches = horizontal_side(X_rot, pb.track, pb.ref) == pb.side
     X_conv = np.where(rot_matches[:, None, None], X_rot, X_ref)
-    X_h = np.where(pb.turns[:, None, None], X_free, X_conv)
-
-    x = np.concatenate([X_h, pb.z[:, :N, None]], axis=-1)
-    return x.reshape(pb.lead + (N, 3))
+    return pb.positions(np.where(pb.turns[:, None, None], X_free, X_conv))

@@ -147,7 +147,4 @@ def nls_init(
     flip = ~pb.turns & (horizontal_side(X_h, pb.track, pb.ref) != pb.side)
     u = pb.track[:, 1] / np.linalg.norm(pb.track[:, 1], axis=-1, keepdims=True)
     X_flip = 2.0 * np.einsum("bnk,bk->bn", X_h, u)[..., None] * u[:, None, :] - X_h
-    X_h = np.where(flip[:, None, None], X_flip, X_h)
-
-    x = np.concatenate([X_h, pb.z[:, :N, None]], axis=-1)
-    return x.reshape(pb.lead + (N, 3))
+    return pb.positions(np.where(flip[:, None, None], X_flip, X_h))
