@@ -113,17 +113,13 @@ def cascaded_fault() -> TaskSpec:
 
 
 def cascaded_fault_random() -> TaskSpec:
-    return TaskSpec(
-        name="CascadedFaultRandom", n_uav=4, duration=50.0,
-        trajectory=PhasedCircles(center=(0.0, 0.0, 2.0), radius=8.0, omega=0.15, phase_step=math.pi / 2,
-                                 z_amplitude=0.5, z_omega=0.2),
-        anchors=THREE_ANCHORS,
-        sensors=Sensors(imu_sigma=0.1, anchor_sigma=0.15, peers=PeerLinks(kind="range", sigma=0.15)),
-        faults=Faults(imu_cascade_random=ImuCascadeRandom(n_faulty=2, start_range=(15.0, 25.0),
-                                                          duration_range=(10.0, 15.0),
-                                                          bias_magnitude_range=(1.5, 2.0))),
-        scoring=Scoring(healthy_nodes=(), fault_window=None),
-    )
+    """CascadedFault-v0's swarm, course and three anchors with the IMU cascade drawn per episode, every UAV scored."""
+    return TaskSpec.model_validate({
+        **cascaded_fault().model_dump(), "name": "CascadedFaultRandom",
+        "faults": Faults(imu_cascade_random=ImuCascadeRandom(n_faulty=2, start_range=(15.0, 25.0),
+                                                             duration_range=(10.0, 15.0),
+                                                             bias_magnitude_range=(1.5, 2.0))).model_dump(),
+        "scoring": Scoring(healthy_nodes=(), fault_window=None).model_dump()})
 
 
 def vision_loss() -> TaskSpec:

@@ -13,6 +13,7 @@ the element (e.g. ``uav * L + channel``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from enum import IntEnum
 
 import numpy as np
@@ -120,21 +121,22 @@ def student_t(seed: int, step: int, stream: int, index: int, dof: int) -> float:
     return student_t_at(stream_key(seed, step, stream), index, dof)
 
 
-def uniform_array(seed: int, step: int, stream: int, indices: np.ndarray) -> np.ndarray:
-    """Vectorised ``uniform`` over an integer index array (Python-side helper)."""
+def _draw_array(draw: Callable[[int, int, int, int], float], seed: int, step: int, stream: int,
+                indices: np.ndarray) -> np.ndarray:
+    """``draw(seed, step, stream, index)`` for every entry of an integer index array, in its shape."""
     out = np.empty(indices.shape, dtype=np.float64)
     flat = indices.ravel()
     res = out.ravel()
     for k in range(flat.size):
-        res[k] = uniform(seed, step, stream, int(flat[k]))
+        res[k] = draw(seed, step, stream, int(flat[k]))
     return out
+
+
+def uniform_array(seed: int, step: int, stream: int, indices: np.ndarray) -> np.ndarray:
+    """Vectorised ``uniform`` over an integer index array (Python-side helper)."""
+    return _draw_array(uniform, seed, step, stream, indices)
 
 
 def normal_array(seed: int, step: int, stream: int, indices: np.ndarray) -> np.ndarray:
     """Vectorised ``normal`` over an integer index array (Python-side helper)."""
-    out = np.empty(indices.shape, dtype=np.float64)
-    flat = indices.ravel()
-    res = out.ravel()
-    for k in range(flat.size):
-        res[k] = normal(seed, step, stream, int(flat[k]))
-    return out
+    return _draw_array(normal, seed, step, stream, indices)
