@@ -22,9 +22,6 @@ from swarmloc.envs.world.reward import RewardWeights
 from swarmloc.envs.adapters.trust_env import (
     ActionChecker,
     TrustEnvBatch,
-    as_policy_flops,
-    as_processor,
-    as_reward_weights,
     build_spec,
 )
 
@@ -63,8 +60,8 @@ class SwarmLocEnv(gym.Env[np.ndarray, np.ndarray]):
         self.task_spec = build_spec(task_id, overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / self.task_spec.dt)))}
-        self._batch = TrustEnvBatch(self.task_spec, 1, reward_weights=as_reward_weights(reward_weights),
-                                    policy_flops=as_policy_flops(policy_flops), processor=as_processor(processor))
+        self._batch = TrustEnvBatch.for_adapter(self.task_spec, 1, reward_weights=reward_weights,
+                                                policy_flops=policy_flops, processor=processor)
         n, n_l = self._batch.n_uav, self._batch.n_channels
         self.observation_space = spaces.Box(0.0, 1.0, (n, n_l, N_FEATURES), np.float32)
         self.action_space = spaces.Box(0.0, 1.0, (n, n_l), np.float32)

@@ -24,9 +24,6 @@ from swarmloc.envs.world.reward import RewardWeights
 from swarmloc.envs.adapters.trust_env import (
     ActionChecker,
     TrustEnvBatch,
-    as_policy_flops,
-    as_processor,
-    as_reward_weights,
     build_spec,
 )
 
@@ -58,8 +55,8 @@ class SwarmLocParallelEnv(ParallelEnv):
             raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "name": spec.task_id, "render_fps": max(1, int(round(1.0 / spec.dt)))}
-        self._batch = TrustEnvBatch(spec, 1, reward_weights=as_reward_weights(reward_weights),
-                                    policy_flops=as_policy_flops(policy_flops), processor=as_processor(processor))
+        self._batch = TrustEnvBatch.for_adapter(spec, 1, reward_weights=reward_weights,
+                                                policy_flops=policy_flops, processor=processor)
         n, n_l = self._batch.n_uav, self._batch.n_channels
         self.possible_agents = [f"uav_{i}" for i in range(n)]
         self.agents: list[str] = []

@@ -40,9 +40,6 @@ from swarmloc.envs.adapters.trust_env import (
     ActionChecker,
     EpisodeSeeder,
     TrustEnvBatch,
-    as_policy_flops,
-    as_processor,
-    as_reward_weights,
     build_spec,
 )
 
@@ -72,8 +69,8 @@ class SwarmLocTorchRLEnv(EnvBase):
         spec = build_spec(task_id, overrides)
         self.task_spec = spec
         n_b = shape[0]
-        self._batch = TrustEnvBatch(spec, n_b, reward_weights=as_reward_weights(reward_weights),
-                                    policy_flops=as_policy_flops(policy_flops), processor=as_processor(processor))
+        self._batch = TrustEnvBatch.for_adapter(spec, n_b, reward_weights=reward_weights,
+                                                policy_flops=policy_flops, processor=processor)
         n, n_l = self._batch.n_uav, self._batch.n_channels
         self._check = ActionChecker((n_b, n, n_l), "(B, N, L)")
         self._seeder = EpisodeSeeder(n_b)

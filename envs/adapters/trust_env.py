@@ -214,6 +214,16 @@ class TrustEnvBatch:
         self.check = ActionChecker((batch_size, self.n_uav, self.n_channels), "(B, N, L)")
         self._last: CoreStep | None = None
 
+    @classmethod
+    def for_adapter(cls, spec: TaskSpec, batch_size: int, *,
+                    reward_weights: RewardWeights | Mapping[str, float] | None = None, policy_flops: float = 0.0,
+                    processor: ProcessorProfile | Mapping[str, Any] | None = None) -> TrustEnvBatch:
+        """The batch an adapter wraps, from the adapter's own arguments: reward weights and processor as
+        objects, mappings of their fields or None (the defaults), the policy FLOPs as a number; all validated
+        (``as_reward_weights``, ``as_policy_flops``, ``as_processor``) before the core is built."""
+        return cls(spec, batch_size, reward_weights=as_reward_weights(reward_weights),
+                   policy_flops=as_policy_flops(policy_flops), processor=as_processor(processor))
+
     # ------------------------------------------------------------------ shapes
     @property
     def obs_shape(self) -> tuple[int, int, int]:

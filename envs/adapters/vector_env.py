@@ -25,9 +25,6 @@ from swarmloc.envs.adapters.trust_env import (
     ActionChecker,
     EpisodeSeeder,
     TrustEnvBatch,
-    as_policy_flops,
-    as_processor,
-    as_reward_weights,
     build_spec,
 )
 
@@ -66,8 +63,8 @@ class SwarmLocVectorEnv(VectorEnv):
         self.copy = copy
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / spec.dt)))}
-        self._batch = TrustEnvBatch(spec, self.num_envs, reward_weights=as_reward_weights(reward_weights),
-                                    policy_flops=as_policy_flops(policy_flops), processor=as_processor(processor))
+        self._batch = TrustEnvBatch.for_adapter(spec, self.num_envs, reward_weights=reward_weights,
+                                                policy_flops=policy_flops, processor=processor)
         n, n_l, n_b = self._batch.n_uav, self._batch.n_channels, self.num_envs
         self.single_observation_space = spaces.Box(0.0, 1.0, (n, n_l, N_FEATURES), np.float32)
         self.single_action_space = spaces.Box(0.0, 1.0, (n, n_l), np.float32)
