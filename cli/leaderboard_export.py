@@ -7,29 +7,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
+from swarmloc.cli.leaderboard_store import StoreOptions, print_wrote
+
 if TYPE_CHECKING:
     from rich.console import Console
 
 
 @dataclass
-class Options:
+class Options(StoreOptions):
     """Export the leaderboard as CSV or JSON."""
 
     format: Literal["csv", "json"] = "csv"
     """Output format."""
     out: Path | None = None
     """Output file (standard output when omitted)."""
-    db_url: str | None = None
-    """Store URL (default: $SWARMLOC_DB, else a SQLite file in the user data directory)."""
-    suite: str | None = None
-    """Only this suite (all suites when omitted)."""
 
 
 def run(opts: Options, console: Console | None = None) -> int:
     """Write the export (atomically when to a file); 1 when the store cannot be opened."""
-    from rich.console import Console
-    from rich.text import Text
-
     from swarmloc.bench.common.files import write_text_atomic
     from swarmloc.leaderboard.site.views import export, open_store_or_refuse
 
@@ -41,5 +36,5 @@ def run(opts: Options, console: Console | None = None) -> int:
         sys.stdout.write(text)
     else:
         write_text_atomic(opts.out, text)
-        (console or Console()).print(Text(f"wrote {opts.out}"))
+        print_wrote(opts.out, console)
     return 0

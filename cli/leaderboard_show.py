@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from swarmloc.cli.leaderboard_store import StoreOptions
+
 if TYPE_CHECKING:
     from rich.console import Console
 
@@ -12,13 +14,9 @@ if TYPE_CHECKING:
 
 
 @dataclass
-class Options:
+class Options(StoreOptions):
     """Print the leaderboard in the terminal (ranked by the score, 2^S; fits 100 columns)."""
 
-    db_url: str | None = None
-    """Store URL (default: $SWARMLOC_DB, else a SQLite file in the user data directory)."""
-    suite: str | None = None
-    """Only this suite (all suites when omitted)."""
     family: str | None = None
     """Show one column per task of this family (e.g. Scale, NLOS, Cascaded) instead of one per family."""
     tasks: str | None = None
