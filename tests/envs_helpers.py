@@ -6,7 +6,10 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs.tasks.specs import Scoring
+from swarmloc.envs.filter import cekf
+from swarmloc.envs.filter.cekf_reference import run_reference
+from swarmloc.envs.world.core import LinkTrustCore
+from swarmloc.envs.tasks.specs import Scoring, TaskSpec
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.worlds import data_missing, make_world
 
@@ -45,15 +48,53 @@ def assert_same(a, b) -> None:
         assert a == b
 
 
-def record(task_id: str, n_steps: int, seeds=(3,), **overrides):
-    """Sense ``n_steps`` steps of a task; return the spec, world and stacked sequences."""
-    spec = get_spec(task_id, **overrides)
+def sense(spec: TaskSpec, n_steps: int, seeds=(3,)):
+    """Sense ``n_steps`` steps of ``spec``'s world; return the world, x0 and the stacked imu, z, valid and true positions."""
     world = make_world(spec, len(seeds))
     x0 = world.reset(list(seeds)).copy()
-    imu, z, valid = [], [], []
+    imu, z, valid, pos = [], [], [], []
     for _ in range(n_steps):
         buf = world.sense()
         imu.append(buf.imu.copy())
         z.append(buf.z.copy())
         valid.append(buf.valid.copy())
-    return spec, world, x0, np.array(imu), np.array(z), np.array(valid)
+        pos.append(buf.pos.copy())
+    return world, x0, np.array(imu), np.array(z), np.array(valid), np.array(pos)
+
+
+def record(task_id: str, n_steps: int, seeds=(3,), **overrides):
+    """Sense ``n_steps`` steps of a task; return the spec, world and stacked sequences."""
+    spec = get_spec(task_id, **overrides)
+    world, x0, imu, z, valid, _ = sense(spec, n_steps, seeds)
+    return spec, world, x0, imu, z, valid
+
+
+def assert_kernel_matches_reference(spec: TaskSpec, world, x0, imu, z, valid, alpha, peer_update: str = "point"):
+    """The fused CEKF kernel (``cekf_run``) and the readable numpy reference (``run_reference``) filter the
+    recorded sequences with trust ``alpha`` to the same estimates and covariances (within 1e-9).
+
+    Returns:
+        ``(P0, args, P_ref)``: the initial covariance, the arguments both took after ``(x, P)``, and the
+        reference's final covariance, for further checks on the same data.
+    """
+    lay = world.layout
+    P0 = cekf.initial_covariance(len(x0), spec.n_uav, spec.filter.init_pos_sigma, spec.filter.init_vel_sigma)
+    args = (imu, z, valid, alpha, lay.kind, lay.target, lay.r0, world.anchors, world.landmarks, spec.dt,
+            spec.sensors.imu_sigma, spec.filter.alpha_th, spec.filter.alpha_min)
+    est_ref, _, P_ref = run_reference(x0, P0, *args, peer_update=peer_update)
+    x, P = x0.copy(), P0.copy()
+    est = np.zeros_like(est_ref)
+    cekf.cekf_run(x, P, *args, est, cekf.PEER_UPDATE_CODES[peer_update])
+    assert np.abs(est - est_ref).max() <= 1e-9
+    assert np.abs(P - P_ref).max() <= 1e-9
+    return P0, args, P_ref
+
+
+def batch_and_singles(spec: TaskSpec, seeds) -> tuple[LinkTrustCore, list[LinkTrustCore]]:
+    """One core of ``len(seeds)`` episodes and one core per episode alone, each reset to its seeds."""
+    batch = LinkTrustCore(spec, len(seeds))
+    batch.reset(seeds)
+    singles = [LinkTrustCore(spec, 1) for _ in seeds]
+    for core, seed in zip(singles, seeds):
+        core.reset([seed])
+    return batch, singles

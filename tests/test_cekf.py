@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.envs.filter import cekf
-from swarmloc.envs.filter.cekf_reference import predict_reference, run_reference, update_reference
+from swarmloc.envs.filter.cekf_reference import predict_reference, update_reference
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 from swarmloc.envs.world.worlds import data_missing
 
-from envs_helpers import record
+from envs_helpers import assert_kernel_matches_reference, record
 
 
 @pytest.mark.parametrize("task_id", sorted(CATALOGUE))
@@ -23,16 +22,7 @@ def test_kernel_matches_reference_400_steps(task_id):
     spec, world, x0, imu, z, valid = record(task_id, n_steps)
     rng = np.random.default_rng(11)
     alpha = rng.uniform(0.0, 1.0, size=valid.shape)  # random trust exercises skipping and inflation
-    lay = world.layout
-    P0 = cekf.initial_covariance(1, spec.n_uav, spec.filter.init_pos_sigma, spec.filter.init_vel_sigma)
-    args = (imu, z, valid, alpha, lay.kind, lay.target, lay.r0, world.anchors, world.landmarks, spec.dt,
-            spec.sensors.imu_sigma, spec.filter.alpha_th, spec.filter.alpha_min)
-    est_ref, _, P_ref = run_reference(x0, P0, *args)
-    x, P = x0.copy(), P0.copy()
-    est = np.zeros_like(est_ref)
-    cekf.cekf_run(x, P, *args, est)
-    assert np.abs(est - est_ref).max() <= 1e-9
-    assert np.abs(P - P_ref).max() <= 1e-9
+    assert_kernel_matches_reference(spec, world, x0, imu, z, valid, alpha)
 
 
 def test_reference_matches_filterpy_fault_free():

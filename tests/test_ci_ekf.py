@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from swarmloc.agents.estimators.ci_ekf import CiEkfConfig, CiEkfEstimator, ci_ekf, ci_ekf_no_aa, range_update, velocity_update
-from swarmloc.agents.protocols import Measurements, TaskFacts, UnsupportedTask, episode_keys
+from swarmloc.agents.protocols import TaskFacts, UnsupportedTask, episode_keys
 from swarmloc.bench.evaluation.alignment import align_estimates
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
+
+from track_b_helpers import play_blind
 
 N = 4
 
@@ -78,25 +80,8 @@ def test_velocity_update_matches_the_closed_form():
 
 def _episode(make, seeds, poison_truth=False, **overrides):
     spec = get_spec("AnchorFree-v0", **overrides)
-    world = World(spec, len(seeds))
-    x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
-    est = make()
-    est.reset(facts, facts.x0)
-    pos, truth, w = [], [], []
-    for k in range(1, spec.n_steps + 1):
-        buf = world.sense()
-        meas = Measurements.capture(buf.imu, buf.z, buf.valid, k * spec.dt, k, buf.velocity)
-        truth.append(buf.pos.copy())
-        saved = buf.pos.copy(), buf.vel.copy()
-        if poison_truth:
-            buf.pos[:] = np.nan
-            buf.vel[:] = np.nan
-        out = est.step(meas)
-        buf.pos[:], buf.vel[:] = saved
-        pos.append(out.positions.copy())
-        w.append(out.weights.copy())
-    return spec, np.array(pos), np.array(truth), np.array(w)
+    played = play_blind(make(), spec, seeds, poison_truth)
+    return spec, played.positions, played.truth, played.weights
 
 
 def test_estimator_is_deterministic_batched_and_blind_to_truth():

@@ -18,6 +18,8 @@ from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
 
+from track_b_helpers import play_blind
+
 T_D = chi2_threshold(0.01, 3)
 
 
@@ -87,25 +89,9 @@ def test_a_faulty_sub_filter_is_isolated_and_loses_its_share():
 
 def _episode(make, seeds: list[int], poison_truth: bool = False, duration: float = 40.0, **overrides):
     spec = get_spec("GradualFault-v0", duration=duration, **overrides)
-    world = World(spec, len(seeds))
-    x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
-    est = make()
-    est.reset(facts, facts.x0)
-    pos, truth = [], []
-    for k in range(1, spec.n_steps + 1):
-        buf = world.sense()
-        meas = Measurements.capture(buf.imu, buf.z, buf.valid, k * spec.dt, k)
-        truth.append(buf.pos.copy())
-        saved = buf.pos.copy(), buf.vel.copy()
-        if poison_truth:  # the estimator must not be able to reach the truth buffers
-            buf.pos[:] = np.nan
-            buf.vel[:] = np.nan
-        out = est.step(meas)
-        buf.pos[:], buf.vel[:] = saved  # the world needs them for its next step
-        assert out.weights is not None and ((out.weights >= 0) & (out.weights <= 1)).all()
-        pos.append(out.positions.copy())
-    return np.array(pos), np.array(truth)
+    played = play_blind(make(), spec, seeds, poison_truth)
+    assert played.weights is not None and ((played.weights >= 0) & (played.weights <= 1)).all()
+    return played.positions, played.truth
 
 
 @pytest.mark.parametrize("make", [federated, federated_fdi])

@@ -17,9 +17,11 @@ from swarmloc.agents.estimators.imm import (
     polar_measurement,
     transition_matrices,
 )
-from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
+from swarmloc.agents.protocols import TaskFacts, episode_keys
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
+
+from track_b_helpers import play_blind
 
 W = 2.0 * math.pi / 180.0
 
@@ -150,25 +152,11 @@ def test_polar_jacobian_matches_finite_differences():
 
 
 def _episode(variant: str, seeds: list[int], poison_truth: bool = False, duration: float = 4.0):
-    spec = get_spec("HybridNoise30-v0", duration=duration)
-    world = World(spec, len(seeds))
-    x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
-    est = ImmEstimator(variant)
-    est.reset(facts, facts.x0)
-    out = []
-    for k in range(1, spec.n_steps + 1):
-        buf = world.sense()
-        meas = Measurements.capture(buf.imu, buf.z, buf.valid, k * spec.dt, k)
-        saved = buf.pos.copy(), buf.vel.copy()
-        if poison_truth:  # the estimator must not be able to reach the truth buffers
-            buf.pos[:] = np.nan
-            buf.vel[:] = np.nan
-        res = est.step(meas)
-        buf.pos[:], buf.vel[:] = saved  # the world needs them for its next step
+    def modes_sum_to_one(est: ImmEstimator, _) -> None:
         assert np.allclose(est.mode_probabilities.sum(axis=-1), 1.0)
-        out.append(res.positions.copy())
-    return np.array(out)
+
+    spec = get_spec("HybridNoise30-v0", duration=duration)
+    return play_blind(ImmEstimator(variant), spec, seeds, poison_truth, check=modes_sum_to_one).positions
 
 
 @pytest.mark.parametrize("variant", ["kf", "ekf", "arkf"])

@@ -20,6 +20,8 @@ from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.adapters.trust_env import TrustEnvBatch
 from swarmloc.envs.world.sim import World
 
+from envs_helpers import batch_and_singles
+
 SEEDS = [1_000_000, 5, 2**40]
 #: between them every channel kind and every systematic error: NLOS ranges (Gauss–Markov and
 #: scheduled steps), IMU cascades with blind nodes, landmarks with outages, GPS drift with
@@ -172,11 +174,7 @@ def test_labels_never_reach_the_observation():
 def test_error_labels_batched_equal_single():
     spec = get_spec("swarmloc/CascadedFaultRandom-v0", duration=30.0)
     seeds = [7, 1_000_000, 2**40]
-    batch = LinkTrustCore(spec, len(seeds))
-    batch.reset(seeds)
-    singles = [LinkTrustCore(spec, 1) for _ in seeds]
-    for core, seed in zip(singles, seeds):
-        core.reset([seed])
+    batch, singles = batch_and_singles(spec, seeds)
     trust = np.full((len(seeds), spec.n_uav, spec.n_channels), 0.8)
     for _ in range(spec.n_steps):
         for b, core in enumerate(singles):

@@ -15,12 +15,12 @@ import pydantic
 import pytest
 
 from swarmloc.envs.filter import cekf
-from swarmloc.envs.filter.cekf_reference import ci_peer_update, run_reference
+from swarmloc.envs.filter.cekf_reference import ci_peer_update
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 from swarmloc.envs.world.worlds import make_world
 
-from envs_helpers import record
+from envs_helpers import assert_kernel_matches_reference, record
 
 
 @pytest.mark.parametrize("task_id, n_steps", [("swarmloc/HybridNoise10-v1", 25), ("swarmloc/GradualFault-v1", 150),
@@ -29,19 +29,10 @@ def test_kernel_matches_reference(task_id, n_steps):
     """Peer ranges (HybridNoise, Scale) and relative positions (GradualFault), random trust."""
     spec, world, x0, imu, z, valid = record(task_id, n_steps, seeds=(5,), filter={"peer_update": "ci"})
     alpha = np.random.default_rng(3).uniform(0.0, 1.0, size=valid.shape)
-    lay = world.layout
-    P0 = cekf.initial_covariance(1, spec.n_uav, spec.filter.init_pos_sigma, spec.filter.init_vel_sigma)
-    args = (imu, z, valid, alpha, lay.kind, lay.target, lay.r0, world.anchors, world.landmarks, spec.dt,
-            spec.sensors.imu_sigma, spec.filter.alpha_th, spec.filter.alpha_min)
-    est_ref, _, P_ref = run_reference(x0, P0, *args, peer_update="ci")
-    x, P = x0.copy(), P0.copy()
-    est = np.zeros_like(est_ref)
-    cekf.cekf_run(x, P, *args, est, cekf.PEER_UPDATE_CODES["ci"])
-    assert np.abs(est - est_ref).max() <= 1e-9
-    assert np.abs(P - P_ref).max() <= 1e-9
+    P0, args, P_ref = assert_kernel_matches_reference(spec, world, x0, imu, z, valid, alpha, peer_update="ci")
     # and the point update is a different filter on the same data
     x_pt, P_pt = x0.copy(), P0.copy()
-    cekf.cekf_run(x_pt, P_pt, *args, np.zeros_like(est_ref))
+    cekf.cekf_run(x_pt, P_pt, *args, np.zeros((len(imu), *x0.shape[:2], 3)))
     assert np.abs(P_pt - P_ref).max() > 1e-3
 
 

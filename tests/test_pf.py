@@ -11,16 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmloc.agents.estimators.pf import core
-from swarmloc.agents.estimators.pf.filters import (
-    ADAPTIVE,
-    FIXED_800,
-    STANDARD,
-    ParticleFilter,
-    PFConfig,
-    PFNNOnlineOracle,
-    make_pfnn,
-)
+from swarmloc.agents.estimators.pf import (ADAPTIVE, FIXED_800, STANDARD, ParticleFilter, PFConfig, PFNNOnlineOracle, core,
+                                           make_pfnn)
 from swarmloc.agents.estimators.pf.pfnn import SHIPPED_WEIGHTS, PFNNWeights, load_weights, random_weights, shipped_weights
 from swarmloc.agents.estimators.pf.reference import ReferenceParticleFilter, systematic_resample_reference, uniform_np
 from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys

@@ -10,10 +10,9 @@ import numpy as np
 import pydantic
 import pytest
 
-from swarmloc.envs.filter import cekf
 from swarmloc.envs.filter.bound import pcrlb, record_inputs
 from swarmloc.envs.filter.bound_reference import pcrlb_reference
-from swarmloc.envs.filter.cekf_reference import measurement_rows, predict_reference, run_reference, update_reference
+from swarmloc.envs.filter.cekf_reference import measurement_rows, predict_reference, update_reference
 from swarmloc.envs.tasks.channels import ANCHOR, KIND_DIM, TDOA, build_layout, tdoa_code, tdoa_pair
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.world.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
@@ -22,25 +21,14 @@ from swarmloc.envs.tasks.specs import TaskSpec, all_pairs, ring_pairs
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
 
+from envs_helpers import assert_kernel_matches_reference, sense
+
 TASK = "swarmloc/TDOA-v1"
 
 
 def quiet(**overrides) -> TaskSpec:
     """TDOA-v1 without faults or losses (one UAV unless overridden)."""
     return get_spec(TASK, **{"n_uav": 1, "faults": {"packet_loss": 0.0, "nlos_gauss_markov": None}, **overrides})
-
-
-def sense(spec: TaskSpec, n_steps: int, seeds=(3,)):
-    world = World(spec, len(seeds))
-    x0 = world.reset(list(seeds)).copy()
-    imu, z, valid, pos = [], [], [], []
-    for _ in range(n_steps):
-        buf = world.sense()
-        imu.append(buf.imu.copy())
-        z.append(buf.z.copy())
-        valid.append(buf.valid.copy())
-        pos.append(buf.pos.copy())
-    return world, x0, np.array(imu), np.array(z), np.array(valid), np.array(pos)
 
 
 def range_difference(p: np.ndarray, anchors: np.ndarray, i: int, j: int) -> float:
@@ -137,15 +125,7 @@ def test_kernel_matches_reference_with_faults_and_random_trust():
     spec = get_spec(TASK, duration=4.0)
     world, x0, imu, z, valid, _ = sense(spec, spec.n_steps, seeds=(3, 11))
     alpha = np.random.default_rng(11).uniform(0.0, 1.0, size=valid.shape)
-    lay = world.layout
-    P0 = cekf.initial_covariance(2, spec.n_uav, spec.filter.init_pos_sigma, spec.filter.init_vel_sigma)
-    args = (imu, z, valid, alpha, lay.kind, lay.target, lay.r0, world.anchors, world.landmarks, spec.dt,
-            spec.sensors.imu_sigma, spec.filter.alpha_th, spec.filter.alpha_min)
-    est_ref, _, P_ref = run_reference(x0, P0, *args)
-    x, P = x0.copy(), P0.copy()
-    est = np.zeros_like(est_ref)
-    cekf.cekf_run(x, P, *args, est)
-    assert np.abs(est - est_ref).max() <= 1e-9 and np.abs(P - P_ref).max() <= 1e-9
+    assert_kernel_matches_reference(spec, world, x0, imu, z, valid, alpha)
 
 
 def test_reference_matches_filterpy_on_a_tdoa_only_case():

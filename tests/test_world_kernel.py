@@ -12,6 +12,8 @@ from swarmloc.envs.tasks.rng import normal, student_t, uniform
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.worlds import data_missing, make_world
 
+from envs_helpers import batch_and_singles
+
 #: between them every channel kind and fault the kernel implements: ranges to anchors and
 #: peers, Gauss–Markov and windowed NLOS, IMU cascades with blind nodes, landmarks with a
 #: camera outage, GPS drift, hybrid GPS noise, relative peers, visual odometry, UWB outage
@@ -45,11 +47,7 @@ def test_parallel_blocks_equal_single_episodes(task_id):
     """From SERIAL_BELOW episodes on the kernel runs in parallel blocks: same numbers as one episode alone."""
     spec = get_spec(task_id, duration=8.0)
     seeds = np.arange(100, 100 + SERIAL_BELOW + 5)
-    batch = LinkTrustCore(spec, len(seeds))
-    batch.reset(seeds)
-    singles = [LinkTrustCore(spec, 1) for _ in seeds]
-    for core, seed in zip(singles, seeds):
-        core.reset([seed])
+    batch, singles = batch_and_singles(spec, seeds)
     trust = np.full((len(seeds), spec.n_uav, spec.n_channels), 0.7)
     for _ in range(spec.n_steps):
         out = batch.step(trust)
