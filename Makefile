@@ -42,7 +42,7 @@ bench: $(STAMP)
 # The generated pages (one per task; the README's leaderboard from the shipped results),
 # then the site in site/ (mkdocs.yml; --strict: a broken link or anchor fails the build).
 docs: $(STAMP)
-	$(BIN)/python -m swarmloc.envs.tasks.docgen docs/tasks
+	$(BIN)/swarmloc docs tasks
 	$(BIN)/swarmloc docs readme
 	$(BIN)/python -m mkdocs build --strict
 

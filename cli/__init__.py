@@ -81,6 +81,7 @@ COMMANDS: CommandTable = {
     },
     "docs": {
         "readme": "swarmloc.cli.docs_readme",
+        "tasks": "swarmloc.cli.docs_tasks",
     },
 }
 

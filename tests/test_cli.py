@@ -122,6 +122,29 @@ def test_help_and_tasks_import_neither_torch_nor_numba():
         assert proc.stdout.strip().splitlines()[-1] == "HEAVY []", (args, proc.stdout[-300:])
 
 
+def test_docs_tasks_writes_the_pages_and_checks_them(tmp_path, capsys):
+    """``swarmloc docs tasks`` writes a page per registered task and the index; ``--check`` names a stale
+    page and a page that no task generates."""
+    from swarmloc.cli import docs_tasks
+    from swarmloc.envs.tasks.catalogue import CATALOGUE
+
+    out = tmp_path / "tasks"
+    assert cli.main(["docs", "tasks", "--out", str(out), "--check"]) == 1  # no pages yet
+    assert cli.main(["docs", "tasks", "--out", str(out)]) == 0
+    assert len(list(out.glob("*.md"))) == len(CATALOGUE) + 1
+    assert docs_tasks.run(docs_tasks.Options(out=out, check=True)) == 0
+    (out / "Gone.md").write_text("a removed task\n", encoding="utf-8")
+    capsys.readouterr()
+    assert docs_tasks.run(docs_tasks.Options(out=out, check=True)) == 1
+    assert "Gone.md" in capsys.readouterr().out
+    (out / "Gone.md").unlink()
+    (out / "Ideal.md").write_text("stale\n", encoding="utf-8")
+    assert docs_tasks.run(docs_tasks.Options(out=out, check=True)) == 1
+    assert "Ideal.md" in capsys.readouterr().out
+    assert docs_tasks.run(docs_tasks.Options(out=out)) == 0
+    assert docs_tasks.run(docs_tasks.Options(out=out, check=True)) == 0
+
+
 def test_bench_speed_writes_json(tmp_path):
     out = tmp_path / "speed.json"
     # one numba thread: under ``make test`` the other xdist worker holds the second core, and

@@ -63,8 +63,8 @@ def test_generated_docs_are_committed_and_current():
     assert len(pages) == len(CATALOGUE) + 1
     for name, text in pages.items():
         path = REPO / "docs" / "tasks" / name
-        assert path.exists(), f"{path} missing: run python -m swarmloc.envs.tasks.docgen docs/tasks"
-        assert path.read_text(encoding="utf-8") == text, f"{path} is stale: rerun the docs generator"
+        assert path.exists(), f"{path} missing: run swarmloc docs tasks"
+        assert path.read_text(encoding="utf-8") == text, f"{path} is stale: run swarmloc docs tasks"
 
 
 def test_fresh_interpreter_make_with_module_prefix_and_cheap_import():

@@ -1,15 +1,13 @@
-"""Write one Markdown page per registered task from its class docstring.
+"""One Markdown page per registered task from its class docstring.
 
-Usage: ``python -m swarmloc.envs.tasks.docgen docs/tasks``. Pages are generated from
-``__doc__`` over the Gymnasium registry (``swarmloc/`` namespace), so the docs are exactly
-what ``help(NLOSEnv)`` shows; an index page lists every task.
+``swarmloc docs tasks`` writes them to ``docs/tasks/``. Pages are generated from ``__doc__``
+over the Gymnasium registry (``swarmloc/`` namespace), so the docs are exactly what
+``help(NLOSEnv)`` shows; an index page lists every task.
 """
 
 from __future__ import annotations
 
-import argparse
 import inspect
-from pathlib import Path
 
 import gymnasium as gym
 
@@ -51,18 +49,3 @@ def task_pages() -> dict[str, str]:
     pages["index.md"] = "\n".join(index) + "\n"
     return pages
 
-
-def main(argv: list[str] | None = None) -> None:
-    """Write the task pages into the given folder (created if missing)."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("out", type=Path, help="output folder, e.g. docs/tasks")
-    out = parser.parse_args(argv).out
-    out.mkdir(parents=True, exist_ok=True)
-    pages = task_pages()
-    for file_name, text in pages.items():
-        (out / file_name).write_text(text, encoding="utf-8")
-    print(f"wrote {len(pages)} pages to {out}")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,10 +1,10 @@
 """Composes the Gymnasium-style class docstring of a task from its spec.
 
-Each per-task class (``task_envs.py``) writes its own Description and Version History;
+Each per-task class (``adapters/task_envs.py``) brings its own Description and Version History;
 everything that follows from the spec — channel layout, measurement model, reward
 constants, episode length, shapes, argument table and a doctest — is generated here so it
 cannot drift from the numbers the environment actually uses. ``docgen`` turns the
-resulting ``__doc__`` into ``docs/tasks/<Name>.md``.
+resulting ``__doc__`` into ``docs/tasks/<Name>.md`` (``swarmloc docs tasks``).
 """
 
 from __future__ import annotations
