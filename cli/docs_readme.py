@@ -4,8 +4,9 @@ The README shows the board of the shipped ``standard-v1`` results between two ma
 text between them is what ``swarmloc leaderboard show --suite standard-v1`` prints after
 ``swarmloc demo`` has stored those results: the same store, ranking and terminal tables
 (``swarmloc.leaderboard.site.views``), printed into a fixed-width text block instead of a
-terminal. ``make docs`` runs this command; ``--check`` (and a test) fail when the README's
-copy no longer matches the shipped files.
+terminal, as wide as its widest table (so that no method name folds). ``make docs`` runs this
+command; ``--check`` (and a test) fail when the README's copy no longer matches the shipped
+files.
 """
 
 from __future__ import annotations
@@ -40,18 +41,24 @@ def leaderboard_block() -> str:
     import io
 
     from rich.console import Console
+    from rich.table import Table
 
     from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE, RESULTS_DIRS
     from swarmloc.leaderboard.store.shipped import load_shipped
     from swarmloc.leaderboard.store.database import LeaderboardStore
-    from swarmloc.leaderboard.site.views import TERMINAL_WIDTH, print_leaderboard
+    from swarmloc.leaderboard.site.views import TERMINAL_WIDTH, leaderboard_tables, print_leaderboard
 
     out = io.StringIO()
-    console = Console(file=out, width=TERMINAL_WIDTH, color_system=None, highlight=False)
     with LeaderboardStore("sqlite://") as store:
         loaded = load_shipped(store, RESULTS_DIRS[DEFAULT_SUITE])
         if loaded.refused:
             raise RuntimeError("shipped results not loaded: " + "; ".join(f"{n}: {why}" for n, why in loaded.refused))
+        # as wide as the widest table lays itself out (at least the terminal's width): squeezed into
+        # fewer columns, rich would fold a long method name onto a second line
+        unbounded = Console(width=10_000)
+        tables = [part for part in leaderboard_tables(store, DEFAULT_SUITE) if isinstance(part, Table)]
+        width = max([TERMINAL_WIDTH] + [unbounded.measure(table).maximum for table in tables])
+        console = Console(file=out, width=width, color_system=None, highlight=False)
         print_leaderboard(store, DEFAULT_SUITE, console)
     lines = [line.rstrip() for line in out.getvalue().strip("\n").splitlines()]
     return "```text\n" + "\n".join(lines) + "\n```\n"
