@@ -48,15 +48,12 @@ import numpy as np
 
 from swarmloc.envs.recorded.util_flight import (
     MAD_TO_SIGMA,
-    VELOCITY_HALF_SPAN,
     Recording,
     _read_only,
-    ahrs_attitude,
     episode_times,
     read_anchors,
     read_tables,
-    step_means,
-    world_acceleration,
+    truth_and_imu,
 )
 
 #: m, the README's airborne rule (mocap z above it)
@@ -220,12 +217,7 @@ def load_tdoa_recording(folder: Path, log: str, start: float, n_steps: int, dt: 
     t = episode_times(data.imu, data.mocap, start, dt, n_steps, f"flight {log!r}")
 
     # ---- truth (the tag) and IMU input
-    pos = tag_positions(data.mocap, t)
-    vel = (tag_positions(data.mocap, t + VELOCITY_HALF_SPAN)
-           - tag_positions(data.mocap, t - VELOCITY_HALF_SPAN)) / (2.0 * VELOCITY_HALF_SPAN)
-    q_samples = ahrs_attitude(data.imu)
-    imu = step_means(data.imu[:, 0], world_acceleration(data.imu, q_samples), t, dt)
-    attitude = q_samples[np.maximum(np.searchsorted(data.imu[:, 0], t, side="right") - 1, 0)]
+    pos, vel, imu, attitude = truth_and_imu(data.mocap, data.imu, t, dt, tag_positions)
 
     # ---- the rules, in order: impossible values, the window, the layout, one arrival per step
     rows = data.tdoa

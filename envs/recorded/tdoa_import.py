@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.envs.recorded.cfusdlog import UsdLog, read_usd_log
-from swarmloc.envs.recorded.util_import import DATA_ENV_VAR, Table, data_root, install_folder
+from swarmloc.envs.recorded.util_import import Table, dataset_folder, install_folder
 
 __all__ = [
     "DATASET_DIR",
@@ -240,12 +240,4 @@ def find_tdoa_data(data_dir: str | Path | None = None) -> Path:
         FileNotFoundError: the folder does not exist; the message says where the data comes
             from and which command imports it.
     """
-    base, origin = data_root(data_dir)
-    folder = base / DATASET_DIR
-    if not folder.is_dir():
-        raise FileNotFoundError(
-            f"UTIL TDOA data not found: {folder} (from {origin}) is not a folder.\n"
-            f"The data comes from {TDOA_SOURCE}\n"
-            f"Import each raw log with `{IMPORT_COMMAND}` using DIR = <data>/{DATASET_DIR}, "
-            f"then set {DATA_ENV_VAR}=<data>.")
-    return folder
+    return dataset_folder(data_dir, DATASET_DIR, "UTIL TDOA", TDOA_SOURCE, IMPORT_COMMAND)

@@ -38,6 +38,7 @@ documented modelling choice (the dataset README in ``<data>/util-twr`` has the n
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -304,6 +305,33 @@ def airborne_window(mocap: np.ndarray, margin: float = TAKEOFF_MARGIN) -> tuple[
     return float(t[air[0]]), float(t[air[-1]])
 
 
+def truth_and_imu(mocap: np.ndarray, imu_samples: np.ndarray, t: np.ndarray, dt: float,
+                  positions: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> tuple[np.ndarray, ...]:
+    """A flight's truth and filter input on the step times ``t`` (``(T+1,)``), as every recording builds them.
+
+    Args:
+        mocap: the mocap rows (time first).
+        imu_samples: the IMU rows (time, gyro, accelerometer).
+        t: the step times [s].
+        dt: the filter step [s].
+        positions: ``positions(mocap, times)`` → the true positions ``(len(times), 3)`` (the mocap
+            origin, or a tag at a lever arm from it).
+
+    Returns:
+        ``pos``, ``vel`` (central difference over ±``VELOCITY_HALF_SPAN``), ``imu`` (the AHRS world
+        acceleration averaged over each step, ``step_means``) and ``attitude`` (the AHRS quaternion
+        of the last IMU sample at or before each step), each ``(T+1, ·)``.
+    """
+    pos = positions(mocap, t)
+    # v(t) ≈ (p(t + h) − p(t − h)) / 2h
+    h = VELOCITY_HALF_SPAN
+    vel = (positions(mocap, t + h) - positions(mocap, t - h)) / (2.0 * h)
+    q_samples = ahrs_attitude(imu_samples)
+    imu = step_means(imu_samples[:, 0], world_acceleration(imu_samples, q_samples), t, dt)
+    attitude = q_samples[np.maximum(np.searchsorted(imu_samples[:, 0], t, side="right") - 1, 0)]
+    return pos, vel, imu, attitude
+
+
 @functools.lru_cache(maxsize=4)
 def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float,
                    calibration: str | None, anchors_file: str = "anchors.csv") -> Recording:
@@ -336,15 +364,8 @@ def load_recording(folder: Path, log: str, start: float, n_steps: int, dt: float
                          f"anchors.csv surveys 0..{len(anchors) - 1}")
     n_a = len(anchors)
 
-    # ---- truth
-    pos = interpolate_positions(data.mocap, t)
-    vel = (interpolate_positions(data.mocap, t + VELOCITY_HALF_SPAN)
-           - interpolate_positions(data.mocap, t - VELOCITY_HALF_SPAN)) / (2.0 * VELOCITY_HALF_SPAN)
-
-    # ---- IMU → world acceleration (gyro + accelerometer only)
-    q_samples = ahrs_attitude(data.imu)
-    imu = step_means(data.imu[:, 0], world_acceleration(data.imu, q_samples), t, dt)
-    attitude = q_samples[np.maximum(np.searchsorted(data.imu[:, 0], t, side="right") - 1, 0)]
+    # ---- truth, and IMU → world acceleration (gyro + accelerometer only)
+    pos, vel, imu, attitude = truth_and_imu(data.mocap, data.imu, t, dt, interpolate_positions)
 
     # ---- ranges: the last range of each anchor in (t_{k−1}, t_k]
     if calibration is None:
@@ -411,5 +432,6 @@ __all__ = [
     "read_anchors",
     "read_flight_log",
     "rotate_to_world",
+    "truth_and_imu",
     "world_acceleration",
 ]

@@ -402,13 +402,23 @@ def find_util_data(data_dir: str | Path | None = None) -> Path:
         FileNotFoundError: the folder does not exist; the message says where the data
             comes from and which command imports it.
     """
+    return dataset_folder(data_dir, DATASET_DIR, "UTIL TWR", UTIL_SOURCE, IMPORT_COMMAND)
+
+
+def dataset_folder(data_dir: str | Path | None, dataset_dir: str, name: str, source: str, import_command: str) -> Path:
+    """The folder ``dataset_dir`` of an imported data set inside the data folder (``data_root``).
+
+    Raises:
+        FileNotFoundError: the folder does not exist; the message names the data set (``name``),
+            where the data comes from (``source``) and the command that imports it.
+    """
     base, origin = data_root(data_dir)
-    folder = base / DATASET_DIR
+    folder = base / dataset_dir
     if not folder.is_dir():
         raise FileNotFoundError(
-            f"UTIL TWR data not found: {folder} (from {origin}) is not a folder.\n"
-            f"The data comes from {UTIL_SOURCE}\n"
-            f"Import each raw log with `{IMPORT_COMMAND}` using DIR = <data>/{DATASET_DIR}, "
+            f"{name} data not found: {folder} (from {origin}) is not a folder.\n"
+            f"The data comes from {source}\n"
+            f"Import each raw log with `{import_command}` using DIR = <data>/{dataset_dir}, "
             f"then set {DATA_ENV_VAR}=<data>."
         )
     return folder
