@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.envs.filter.cekf_reference import predict_reference, update_reference
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 from swarmloc.envs.world.worlds import data_missing
 
-from envs_helpers import assert_kernel_matches_reference, record
+from envs_helpers import assert_kernel_matches_reference, assert_reference_matches_filterpy, record
 
 
 @pytest.mark.parametrize("task_id", sorted(CATALOGUE))
@@ -26,20 +25,8 @@ def test_kernel_matches_reference_400_steps(task_id):
 
 
 def test_reference_matches_filterpy_fault_free():
-    filterpy = pytest.importorskip("filterpy.kalman")
     spec, world, x0, imu, z, valid = record("swarmloc/Ideal-v0", 400, n_uav=1)
-    lay = world.layout
-    dt, q = spec.dt, spec.sensors.imu_sigma
-    P0 = np.diag([spec.filter.init_pos_sigma**2] * 3 + [spec.filter.init_vel_sigma**2] * 3)
     anchors = world.anchors
-    ekf = filterpy.ExtendedKalmanFilter(dim_x=6, dim_z=len(anchors), dim_u=3)
-    ekf.x = x0[0, 0].copy()
-    ekf.P = P0.copy()
-    ekf.F = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
-    G = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3)])
-    ekf.B = G
-    ekf.Q = q**2 * G @ G.T
-    ekf.R = np.diag(lay.r0[0])
 
     def hx(x):
         return np.linalg.norm(x[:3] - anchors, axis=1)
@@ -49,18 +36,7 @@ def test_reference_matches_filterpy_fault_free():
         H[:, :3] = (x[:3] - anchors) / hx(x)[:, None]
         return H
 
-    x_ref, P_ref = x0[0, 0].copy(), P0.copy()
-    ones = np.ones(len(anchors))
-    for k in range(len(imu)):
-        assert valid[k, 0, 0].all()
-        ekf.predict(u=imu[k, 0, 0])
-        ekf.update(z[k, 0, 0, :, 0], jac, hx)
-        x_ref, P_ref = predict_reference(x_ref, P_ref, imu[k, 0, 0], dt, q)
-        x_ref, P_ref, _ = update_reference(x_ref, P_ref, z[k, 0, 0], valid[k, 0, 0], ones, lay.kind[0],
-                                           lay.target[0], lay.r0[0], anchors, world.landmarks,
-                                           np.zeros((1, 3)), spec.filter.alpha_th, spec.filter.alpha_min)
-        assert np.abs(x_ref - ekf.x).max() <= 1e-9
-        assert np.abs(P_ref - ekf.P).max() <= 1e-9
+    assert_reference_matches_filterpy(spec, world, x0, imu, z, valid, hx, jac)
 
 
 def test_covariance_symmetric_positive_definite_10000_random_steps():

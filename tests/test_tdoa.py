@@ -12,7 +12,7 @@ import pytest
 
 from swarmloc.envs.filter.bound import pcrlb, record_inputs
 from swarmloc.envs.filter.bound_reference import pcrlb_reference
-from swarmloc.envs.filter.cekf_reference import measurement_rows, predict_reference, update_reference
+from swarmloc.envs.filter.cekf_reference import measurement_rows
 from swarmloc.envs.tasks.channels import ANCHOR, KIND_DIM, TDOA, build_layout, tdoa_code, tdoa_pair
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.world.cost import PREDICT_FLOPS, TDOA_ROW_FLOPS
@@ -21,7 +21,7 @@ from swarmloc.envs.tasks.specs import TaskSpec, all_pairs, ring_pairs
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
 
-from envs_helpers import assert_kernel_matches_reference, sense
+from envs_helpers import assert_kernel_matches_reference, assert_reference_matches_filterpy, sense
 
 TASK = "swarmloc/TDOA-v1"
 
@@ -129,17 +129,10 @@ def test_kernel_matches_reference_with_faults_and_random_trust():
 
 
 def test_reference_matches_filterpy_on_a_tdoa_only_case():
-    filterpy = pytest.importorskip("filterpy.kalman")
     spec = quiet()
     world, x0, imu, z, valid, _ = sense(spec, 300)
-    lay, anchors, dt, q = world.layout, world.anchors, spec.dt, spec.sensors.imu_sigma
-    pairs = np.array([tdoa_pair(int(c), len(anchors)) for c in lay.target[0]])
-    P0 = np.diag([spec.filter.init_pos_sigma**2] * 3 + [spec.filter.init_vel_sigma**2] * 3)
-    ekf = filterpy.ExtendedKalmanFilter(dim_x=6, dim_z=len(pairs), dim_u=3)
-    ekf.x, ekf.P = x0[0, 0].copy(), P0.copy()
-    ekf.F = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
-    G = np.vstack([0.5 * dt * dt * np.eye(3), dt * np.eye(3)])
-    ekf.B, ekf.Q, ekf.R = G, q**2 * G @ G.T, np.diag(lay.r0[0])
+    anchors = world.anchors
+    pairs = np.array([tdoa_pair(int(c), len(anchors)) for c in world.layout.target[0]])
 
     def hx(x):
         # h = ‖p − a_j‖ − ‖p − a_i‖ per pair (i, j)
@@ -151,17 +144,7 @@ def test_reference_matches_filterpy_on_a_tdoa_only_case():
         H[:, :3] = u(anchors[pairs[:, 1]]) - u(anchors[pairs[:, 0]])
         return H
 
-    x_ref, P_ref, ones = x0[0, 0].copy(), P0.copy(), np.ones(len(pairs))
-    for k in range(len(imu)):
-        assert valid[k, 0, 0].all()
-        ekf.predict(u=imu[k, 0, 0])
-        ekf.update(z[k, 0, 0, :, 0], jac, hx)
-        x_ref, P_ref = predict_reference(x_ref, P_ref, imu[k, 0, 0], dt, q)
-        x_ref, P_ref, active = update_reference(x_ref, P_ref, z[k, 0, 0], valid[k, 0, 0], ones, lay.kind[0],
-                                                lay.target[0], lay.r0[0], anchors, world.landmarks,
-                                                np.zeros((1, 3)), spec.filter.alpha_th, spec.filter.alpha_min)
-        assert active.all()
-        assert np.abs(x_ref - ekf.x).max() <= 1e-9 and np.abs(P_ref - ekf.P).max() <= 1e-9
+    assert_reference_matches_filterpy(spec, world, x0, imu, z, valid, hx, jac)
 
 
 def test_features_and_flops_of_a_tdoa_row():
