@@ -4,6 +4,7 @@
 truth, channel validity, fault labels, applied trust and FLOPs; ``episode_metrics(b)``
 then evaluates every metric of ``swarmloc.bench.scoring.metrics`` for episode b. Only
 ``(T, B, N)`` errors and streaming channel sums are kept, never ``(T, B, N, L)`` arrays.
+``MetricsObserver`` feeds a recorder from the episode loop (``episode.fly_episodes``).
 """
 
 from __future__ import annotations
@@ -12,12 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.scoring import metrics as M
 from swarmloc.bench.evaluation import selection
 from swarmloc.bench.evaluation.alignment import align_estimates
+from swarmloc.bench.evaluation.episode import EpisodeBatch, StepRecord
 from swarmloc.bench.evaluation.traces import Trace
-from swarmloc.envs.world.reward import RewardTerms, standard_reward, team_reward
+from swarmloc.bench.scoring import metrics as M
 from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.world.reward import RewardTerms, standard_reward, team_reward
 
 
 class EpisodeRecorder:
@@ -172,3 +174,43 @@ class EpisodeRecorder:
                      kind=np.asarray(layout_kind), scored=self.nodes[0].copy(),
                      fault_window=np.array(window if window is not None else (np.nan, np.nan), dtype=float),
                      **self.trace)
+
+
+class MetricsObserver:
+    """The runner's observer of the episode loop: an ``EpisodeRecorder`` of the batch.
+
+    The recorder is made at the first update, where an estimator's output tells whether
+    it reports trust and FLOPs (a policy always does).
+
+    Args:
+        trace: keep a per-step record of episode 0.
+    """
+
+    def __init__(self, trace: bool = False) -> None:
+        self.trace = trace
+        self.batch: EpisodeBatch | None = None
+        self.recorder: EpisodeRecorder | None = None
+
+    def begin(self, batch: EpisodeBatch) -> None:
+        """Start recording ``batch`` (a new recorder at its first update)."""
+        self.batch, self.recorder = batch, None
+
+    def observe(self, r: StepRecord) -> None:
+        """Record update ``r.k`` (``EpisodeRecorder.record``)."""
+        rec = self.recorder
+        if rec is None:
+            b = self.batch
+            assert b is not None, "begin() comes first"
+            rec = self.recorder = EpisodeRecorder(b.spec, b.seeds, b.schedule, b.layout.n_channels,
+                                                  r.applied is not None, r.flops is not None, self.trace)
+        rec.record(r.k, r.estimate, r.truth, r.valid, r.label, r.applied, r.previous, r.flops, r.terms)
+
+    def episode_metrics(self) -> list[dict[str, float | None]]:
+        """Every episode's metrics, in seed order (``EpisodeRecorder.episode_metrics``)."""
+        assert self.recorder is not None and self.batch is not None, "no update recorded"
+        return [self.recorder.episode_metrics(b) for b in range(len(self.batch.seeds))]
+
+    def make_trace(self) -> Trace | None:
+        """The trace of episode 0 (None if not kept)."""
+        assert self.recorder is not None and self.batch is not None, "no update recorded"
+        return self.recorder.make_trace(self.batch.method, self.batch.layout.kind)

@@ -1,7 +1,8 @@
 """The evaluation runner: methods × suite → per-episode metrics → a results file.
 
-One task's seeds run as one batch (a ``TrustEnvBatch`` for Track A, a ``World`` for
-Track B, B = number of seeds); a suite runs as (method, task, seed-chunk) jobs on an
+One task's seeds run as one batch through the episode loop (``episode.py``: a
+``TrustEnvBatch`` for Track A, the task's world for Track B, B = number of seeds), scored
+by its metrics observer (``recorder.py``); a suite runs as (method, task, seed-chunk) jobs on an
 execution backend, ``serial``, ``process`` or ``ray`` (``backends.py``; the chunks come
 back together in ``outcomes.py``). Every random draw is keyed by (seed, step, stream,
 index) and methods draw from per-episode keys, so an episode's metrics are identical
@@ -17,7 +18,7 @@ Nothing precomputed is shipped, so a score is always consistent with the code th
 produced it.
 
 Privileged methods get the pending measurements' fault labels through
-``observe_privileged`` before every ``act``/``step``; no other method ever does. A
+``observe_privileged`` before every ``act``/``step`` (in the episode loop); no other method ever does. A
 ``PrivilegedInfo`` carries the injected-fault labels (what the detection metrics count)
 and the error labels (``swarmloc.envs.world.labels``): on Track A the core's, peer links included
 through the neighbour's broadcast estimate, with the systematic error in σ_eff behind them;
@@ -27,24 +28,13 @@ own).
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-import numpy as np
-
-from swarmloc.agents.protocols import (
-    EstimatorOutput,
-    Measurements,
-    PrivilegedInfo,
-    TaskFacts,
-    TrustInput,
-    UnsupportedTask,
-    episode_keys,
-)
+from swarmloc.agents.protocols import UnsupportedTask
 from swarmloc.agents.registry import REFERENCE_UNIFORM, LoadedMethod, load_method
 from swarmloc.bench.evaluation.backends import (
     BACKENDS,
@@ -56,7 +46,7 @@ from swarmloc.bench.evaluation.backends import (
     pin_torch_threads,
     run_jobs,
 )
-from swarmloc.bench.scoring.bounds import episode_bounds
+from swarmloc.bench.evaluation.episode import fly_episodes, single_threaded_kernels  # noqa: F401 (re-exported)
 from swarmloc.bench.evaluation.outcomes import (
     EvaluationFailed,
     Gathered,
@@ -67,151 +57,24 @@ from swarmloc.bench.evaluation.outcomes import (
     suite_info,
     write_run,
 )
-from swarmloc.bench.evaluation.recorder import EpisodeRecorder
+from swarmloc.bench.evaluation.recorder import EpisodeRecorder, MetricsObserver
 from swarmloc.bench.evaluation.results import METRIC_NAMES, Results
 from swarmloc.bench.evaluation.suites import Suite, require_data
 from swarmloc.bench.evaluation.traces import Trace, read_traces, traces_path, write_traces
-from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.bench.scoring.bounds import episode_bounds
 from swarmloc.envs.tasks.catalogue import get_spec
-from swarmloc.envs.adapters.trust_env import TrustEnvBatch
-from swarmloc.envs.world.sim import World, validate_seeds
+from swarmloc.envs.tasks.specs import TaskSpec
+from swarmloc.envs.world.sim import validate_seeds
 
 _Recorder = EpisodeRecorder  # former private name, kept for existing imports
-
-
-def make_world(spec: TaskSpec, batch_size: int) -> Any:
-    """The task's world: ``swarmloc.envs.world.worlds.make_world`` (simulated or recorded) where available."""
-    try:
-        from swarmloc.envs.world.worlds import make_world as _make_world
-    except ImportError:  # an envs without recorded worlds: every world is simulated
-        return World(spec, batch_size)
-    return _make_world(spec, batch_size)
 
 
 # --------------------------------------------------------------------------- rollouts
 
 
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    view = arr.view()
-    view.flags.writeable = False
-    return view
-
-
-def _reset_or_unsupported(loaded: LoadedMethod, spec: TaskSpec, reset: Callable[[], None]) -> None:
-    """Call a method's reset; a refusal (ValueError / NotImplementedError) means "cannot run this task"."""
-    try:
-        reset()
-    except UnsupportedTask:
-        raise
-    except (ValueError, NotImplementedError) as err:
-        raise UnsupportedTask(f"{loaded.name} cannot run {spec.task_id}: {err}") from err
-
-
-def _rollout_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray, trace: bool) -> tuple[EpisodeRecorder, Any]:
-    """Run a Track A policy on B episodes through ``TrustEnvBatch``, the env every adapter wraps.
-
-    Observation, reward, FLOPs and delay come from the env's ``step``: the numbers a
-    Gymnasium user sees are the numbers the leaderboard records.
-    """
-    policy = loaded.method
-    n_b = len(seeds)
-    env = TrustEnvBatch(spec, n_b, policy_flops_per_channel=float(getattr(policy, "flops_per_channel", 0.0)))
-    cs = env.reset(seeds)
-    layout = env.layout
-    _reset_or_unsupported(loaded, spec, lambda: policy.reset(n_b, layout, episode_keys(seeds)))
-    obs = None
-    rec = EpisodeRecorder(spec, seeds, getattr(env.core.world, "schedule", None), layout.n_channels, True, True, trace)
-    for k in range(spec.n_steps):
-        obs = env.observation(out=obs)
-        inp = TrustInput.view(obs, cs.resid, cs.pred, cs.nis, cs.applied, cs.jerk, cs.valid,
-                              (k + 1) * spec.dt, k + 1)
-        if loaded.privileged:
-            policy.observe_privileged(PrivilegedInfo(
-                labels=_readonly(env.pending_labels().copy()),
-                error_labels=_readonly(env.pending_error_labels().copy()),
-                systematic_sigmas=_readonly(env.pending_systematic_sigmas().copy())))
-        cs, terms = env.step(env.check(policy.act(inp)))
-        rec.record(k, cs.estimate, cs.truth, cs.update_valid, cs.label, cs.applied, cs.prev_trust, terms.flops,
-                   terms)
-    return rec, layout
-
-
-def _check_output(out: Any, name: str, shape: tuple[int, int, int]) -> EstimatorOutput:
-    n_b, n, n_l = shape
-    if not isinstance(out, EstimatorOutput):
-        raise TypeError(f"estimator {name!r} returned {type(out).__name__}; expected EstimatorOutput")
-    pos = np.asarray(out.positions)
-    if pos.shape != (n_b, n, 3):
-        raise ValueError(f"estimator {name!r} returned positions of shape {pos.shape}; expected (B, N, 3) = "
-                         f"{(n_b, n, 3)}")
-    if not np.isfinite(pos).all():
-        bad = tuple(np.argwhere(~np.isfinite(pos))[0].tolist())
-        raise ValueError(f"estimator {name!r} returned a non-finite position {pos[bad]} at index {bad}")
-    if out.weights is not None and np.shape(out.weights) != (n_b, n, n_l):
-        raise ValueError(f"estimator {name!r} returned weights of shape {np.shape(out.weights)}; expected "
-                         f"(B, N, L) = {(n_b, n, n_l)}")
-    if out.flops is not None and np.shape(out.flops) != (n_b, n):
-        raise ValueError(f"estimator {name!r} returned flops of shape {np.shape(out.flops)}; expected (B, N) = "
-                         f"{(n_b, n)}")
-    return out
-
-
-def _rollout_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
-                       trace: bool) -> tuple[EpisodeRecorder, Any]:
-    """Run a Track B estimator on B episodes through ``World``."""
-    est = loaded.method
-    n_b = len(seeds)
-    world = make_world(spec, n_b)
-    x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds), anchors=world.anchors)
-    _reset_or_unsupported(loaded, spec, lambda: est.reset(facts, facts.x0))
-    shape = (n_b, spec.n_uav, world.layout.n_channels)
-    rec: EpisodeRecorder | None = None
-    previous: np.ndarray | None = None
-    for k in range(spec.n_steps):
-        buf = world.sense()
-        meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1,
-                                    getattr(buf, "velocity", None))
-        if loaded.privileged:
-            est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy()),
-                                                  error_labels=_readonly(buf.error_label.copy())))
-        out = _check_output(est.step(meas), loaded.name, shape)
-        if rec is None:
-            rec = EpisodeRecorder(spec, seeds, getattr(world, "schedule", None), shape[2], out.weights is not None, out.flops is not None,
-                            trace)
-        weights = None if out.weights is None else np.clip(np.asarray(out.weights, dtype=np.float64), 0.0, 1.0)
-        if weights is not None and previous is None:
-            previous = np.ones(shape)
-        flops = None if out.flops is None else np.asarray(out.flops, dtype=np.float64)
-        rec.record(k, np.asarray(out.positions, dtype=np.float64), buf.pos, buf.valid, buf.label, weights,
-                   previous, flops)
-        previous = weights
-    assert rec is not None  # n_steps >= 1
-    return rec, world.layout
-
-
-@contextlib.contextmanager
-def single_threaded_kernels() -> Iterator[None]:
-    """Run numba kernels on one thread inside the block (restored afterwards).
-
-    The runner's batches are small (B = seeds per task): thread launches cost more than
-    they save, and on a busy machine spinning threads slow everything down tenfold.
-    Parallelism comes from worker processes instead (``backends.pin_torch_threads`` puts
-    torch on one thread in a pool worker once a job has loaded it).
-    """
-    import numba
-
-    previous = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(previous)
-
-
 def rollout(loaded: LoadedMethod, spec: TaskSpec, seeds: Sequence[int],
             trace: bool = False) -> tuple[list[dict[str, float | None]], Trace | None]:
-    """Run one method on B episodes of one task.
+    """Run one method on B episodes of one task (``episode.fly_episodes``) and score them.
 
     Args:
         loaded: the method (fresh instance; it is reset here).
@@ -222,11 +85,9 @@ def rollout(loaded: LoadedMethod, spec: TaskSpec, seeds: Sequence[int],
     Returns:
         ``(metrics per seed, trace or None)``; ``uniform_rmse`` and ``bound_rmse`` are None here.
     """
-    seeds = validate_seeds(list(seeds))
-    run = _rollout_policy if loaded.track == "A" else _rollout_estimator
-    with single_threaded_kernels():
-        rec, layout = run(loaded, spec, seeds, trace)
-    return [rec.episode_metrics(b) for b in range(len(seeds))], rec.make_trace(loaded.name, layout.kind)
+    metrics = MetricsObserver(trace)
+    fly_episodes(loaded, spec, seeds, [metrics])
+    return metrics.episode_metrics(), metrics.make_trace()
 
 
 # --------------------------------------------------------------------------- references and tasks

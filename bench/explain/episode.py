@@ -1,7 +1,8 @@
 """One recorded Track A episode: what the method saw and did at every step, and how it went.
 
-``replay(method, spec, seeds)`` steps ``swarmloc.envs.adapters.trust_env.TrustEnvBatch`` (the same
-batched environment every adapter wraps) with a Track A method and keeps, per step, the
+``replay(method, spec, seeds)`` flies a Track A method through the episode loop
+(``swarmloc.bench.evaluation.episode``: ``TrustEnvBatch``, the same batched environment
+every adapter wraps) and keeps, as an observer of every step, the
 ``TrustInput`` the method was given, the trust it returned, the fault labels of the
 measurements and the position errors of the update. An explainer re-reads the inputs
 (:meth:`Episode.inputs`) to probe the method off the recorded path; labels and errors
@@ -14,18 +15,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from swarmloc.agents.protocols import TrustInput, episode_keys
 from swarmloc.agents.registry import LoadedMethod, load_method
+from swarmloc.bench.evaluation.episode import EpisodeBatch, StepRecord, fly_episodes
 from swarmloc.bench.evaluation.selection import scored_node_masks
 from swarmloc.envs.tasks.channels import ChannelLayout
-from swarmloc.envs.world.observation import N_FEATURES
 from swarmloc.envs.tasks.specs import TaskSpec
-from swarmloc.envs.adapters.trust_env import TrustEnvBatch
-from swarmloc.envs.world.sim import validate_seeds
+from swarmloc.envs.world.observation import N_FEATURES
 
 
 @dataclass(frozen=True)
@@ -105,18 +104,39 @@ def as_loaded(method: str | LoadedMethod, version: int | None = None) -> LoadedM
     return loaded
 
 
-def _checked_trust(alpha: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
-    alpha = np.asarray(alpha, dtype=np.float64)
-    if alpha.shape != shape:
-        raise ValueError(f"{name} returned trust of shape {alpha.shape}; expected (B, N, L) = {shape}")
-    if not np.isfinite(alpha).all():
-        bad = tuple(np.argwhere(~np.isfinite(alpha))[0].tolist())
-        raise ValueError(f"{name} returned a non-finite trust {alpha[bad]} at index {bad}")
-    return np.clip(alpha, 0.0, 1.0)
+class _Recording:
+    """The episode loop's observer behind :func:`replay`: every step's features, trust, labels and errors."""
+
+    wants_features = True
+
+    def begin(self, batch: EpisodeBatch) -> None:
+        n_t, n_b = batch.spec.n_steps, len(batch.seeds)
+        shape = (n_b, batch.spec.n_uav, batch.layout.n_channels)
+        self.batch = batch
+        self.arrays = {name: np.zeros((n_t, *shape)) for name in ("resid", "pred", "nis", "applied", "trust")}
+        self.arrays.update(obs=np.zeros((n_t, *shape, N_FEATURES), dtype=np.float32),
+                           jerk=np.zeros((n_t, n_b, batch.spec.n_uav)), valid=np.zeros((n_t, *shape), dtype=bool),
+                           label=np.zeros((n_t, *shape), dtype=bool), error=np.zeros((n_t, n_b, batch.spec.n_uav)))
+
+    def observe(self, r: StepRecord) -> None:
+        a, inp, k = self.arrays, r.features, r.k
+        assert inp is not None  # wants_features
+        for name in ("obs", "resid", "pred", "nis", "applied", "jerk", "valid"):
+            a[name][k] = getattr(inp, name)
+        a["trust"][k], a["label"][k] = r.trust, r.label
+        # ‖p̂ − p‖, as TrustEnvBatch.position_error
+        d = r.estimate - r.truth
+        a["error"][k] = np.sqrt((d * d).sum(axis=-1))
+
+    def episode(self) -> Episode:
+        b, a = self.batch, self.arrays
+        return Episode(spec=b.spec, seeds=b.seeds, layout=b.layout, method=b.method,
+                       times=(np.arange(b.spec.n_steps) + 1) * b.spec.dt,
+                       scored=scored_node_masks(b.spec, b.schedule, len(b.seeds)), **a)
 
 
 def replay(method: str | LoadedMethod, spec: TaskSpec, seeds: Sequence[int]) -> Episode:
-    """Fly B episodes of ``spec`` with a Track A method and record them.
+    """Fly B episodes of ``spec`` with a Track A method and record them (the episode loop, ``fly_episodes``).
 
     Args:
         method: a registered name or entry point, or a fresh ``LoadedMethod`` (it is reset here).
@@ -126,35 +146,6 @@ def replay(method: str | LoadedMethod, spec: TaskSpec, seeds: Sequence[int]) -> 
     Returns:
         The recorded ``Episode``.
     """
-    loaded = as_loaded(method, spec.version)
-    seeds_arr = np.asarray(validate_seeds(list(seeds)), dtype=np.int64)
-    n_b, n_t = len(seeds_arr), spec.n_steps
-    env = TrustEnvBatch(spec, n_b)
-    cs = env.reset(seeds_arr)
-    layout = env.layout
-    policy = loaded.method
-    policy.reset(n_b, layout, episode_keys(seeds_arr))
-    shape = (n_b, env.n_uav, env.n_channels)
-    rec = {name: np.zeros((n_t, *shape)) for name in ("resid", "pred", "nis", "applied", "trust")}
-    obs = np.zeros((n_t, *shape, N_FEATURES), dtype=np.float32)
-    jerk = np.zeros((n_t, n_b, env.n_uav))
-    valid = np.zeros((n_t, *shape), dtype=bool)
-    label = np.zeros((n_t, *shape), dtype=bool)
-    error = np.zeros((n_t, n_b, env.n_uav))
-    times = (np.arange(n_t) + 1) * spec.dt
-    for k in range(n_t):
-        env.observation(out=obs[k])
-        for name in ("resid", "pred", "nis", "applied"):
-            rec[name][k] = getattr(cs, name)
-        jerk[k], valid[k] = cs.jerk, cs.valid
-        alpha = _checked_trust(policy.act(TrustInput.view(obs[k], rec["resid"][k], rec["pred"][k], rec["nis"][k],
-                                                          rec["applied"][k], jerk[k], valid[k], times[k], k + 1)),
-                               shape, loaded.name)
-        rec["trust"][k] = alpha
-        cs, _ = env.step(alpha)
-        label[k] = cs.label
-        error[k] = env.position_error()
-    return Episode(spec=spec, seeds=seeds_arr, layout=layout, method=loaded.name, times=times, obs=obs,
-                   resid=rec["resid"], pred=rec["pred"], nis=rec["nis"], applied=rec["applied"], jerk=jerk,
-                   valid=valid, trust=rec["trust"], label=label, error=error,
-                   scored=scored_node_masks(spec, getattr(env.core.world, "schedule", None), n_b))
+    recording = _Recording()
+    fly_episodes(as_loaded(method, spec.version), spec, seeds, [recording])
+    return recording.episode()

@@ -2,30 +2,29 @@
 
 Headline RMSEs and every ordering come from the runner (``rollout``, the leaderboard's
 metrics). Per-axis and per-UAV breakdowns and the raw-range anomaly statistics need
-per-step errors and the truth, so :func:`episode_errors` replays the runner's loop (same
-world, measurements, alignment) and keeps them. Our worlds are not the papers'
+per-step errors and the truth, so :func:`episode_errors` observes the runner's episode
+loop (same world, measurements, alignment) and keeps them. Our worlds are not the papers'
 simulators: compare orderings and magnitudes, not digits.
 """
 
 from __future__ import annotations
 
-import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.protocols import Measurements, TaskFacts, episode_keys
 from swarmloc.agents.registry import LoadedMethod
 from swarmloc.bench.common.provenance import collect_provenance
-from swarmloc.bench.reports.markdown import report_path, write_report
 from swarmloc.bench.evaluation.alignment import align_estimates
-from swarmloc.bench.evaluation.runner import rollout, single_threaded_kernels
-from swarmloc.bench.scoring.stats import bootstrap_ci
+from swarmloc.bench.evaluation.episode import EpisodeBatch, StepRecord, fly_episodes
+from swarmloc.bench.evaluation.runner import rollout
 from swarmloc.bench.evaluation.suites import TEST_SEED_START
+from swarmloc.bench.reports.markdown import report_path, write_report
+from swarmloc.bench.scoring.stats import bootstrap_ci
 from swarmloc.envs.tasks.channels import PEER
 from swarmloc.envs.tasks.specs import TaskSpec
-from swarmloc.envs.world.sim import World
 
 Factory = Callable[[], Any]
 
@@ -45,8 +44,33 @@ def runner_metrics(label: str, make: Factory, spec: TaskSpec, seeds: list[int]) 
     return metrics
 
 
+class _StepErrors:
+    """The episode loop's observer behind :func:`episode_errors`: positions, truth, trust, raw range errors, time."""
+
+    def begin(self, batch: EpisodeBatch) -> None:
+        n_t, n_b, n = batch.spec.n_steps, len(batch.seeds), batch.spec.n_uav
+        peer = batch.layout.kind == PEER
+        self.peer, self.target = peer, np.where(peer, batch.layout.target, 0)
+        self.pos, self.truth = np.zeros((n_t, n_b, n, 3)), np.zeros((n_t, n_b, n, 3))
+        self.weights = np.ones((n_t, n_b) + peer.shape)
+        self.range_err = np.full((n_t, n_b) + peer.shape, np.nan)
+        self.valid = np.zeros((n_t, n_b) + peer.shape, dtype=bool)
+        self.spent = 0.0
+
+    def observe(self, r: StepRecord) -> None:
+        k, out, truth = r.k, r.output, r.truth
+        assert out is not None and r.measurements is not None  # a Track B step
+        self.pos[k], self.truth[k], self.valid[k] = out.positions, truth, r.valid
+        if out.weights is not None:
+            self.weights[k] = out.weights
+        d = np.linalg.norm(truth[:, :, None, :] - truth[:, self.target, :], axis=-1)
+        self.range_err[k] = np.where(self.peer, np.abs(r.measurements.z[..., 0] - d), np.nan)
+        self.spent += r.method_s
+
+
 def episode_errors(make: Factory, spec: TaskSpec, seeds: list[int]) -> dict[str, np.ndarray]:
-    """The runner's Track B loop, keeping per-step errors, trust and the raw range errors.
+    """An estimator through the episode loop (``fly_episodes``, as the runner), keeping per-step errors, trust
+    and the raw range errors.
 
     Returns:
         ``err`` (T, B, N, 3) estimate − truth after the task's scoring alignment,
@@ -54,35 +78,16 @@ def episode_errors(make: Factory, spec: TaskSpec, seeds: list[int]) -> dict[str,
         ``range_err`` (T, B, N, L) |measured − true range| on peer channels (NaN elsewhere),
         ``valid`` (T, B, N, L), ``step_ms`` mean wall time of ``step`` [ms].
     """
-    world = World(spec, len(seeds))
-    x0 = world.reset(seeds).copy()
-    facts = TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
     est = make()
-    est.reset(facts, facts.x0)
-    peer = world.layout.kind == PEER
-    target = np.where(peer, world.layout.target, 0)
+    name = type(est).__name__
+    loaded = LoadedMethod(name=name, entry_point=name, track="B", privileged=False, deterministic=True, method=est)
+    steps = _StepErrors()
+    fly_episodes(loaded, spec, seeds, [steps])
     T = spec.n_steps
-    pos, truth = np.zeros((T, len(seeds), spec.n_uav, 3)), np.zeros((T, len(seeds), spec.n_uav, 3))
-    weights = np.ones((T, len(seeds)) + peer.shape)
-    range_err = np.full((T, len(seeds)) + peer.shape, np.nan)
-    valid = np.zeros((T, len(seeds)) + peer.shape, dtype=bool)
-    spent = 0.0
-    with single_threaded_kernels():
-        for k in range(T):
-            buf = world.sense()
-            meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1, buf.velocity)
-            t0 = time.perf_counter()
-            out = est.step(meas)
-            spent += time.perf_counter() - t0
-            pos[k], truth[k], valid[k] = out.positions, buf.pos, buf.valid
-            if out.weights is not None:
-                weights[k] = out.weights
-            d = np.linalg.norm(buf.pos[:, :, None, :] - buf.pos[:, target, :], axis=-1)
-            range_err[k] = np.where(peer, np.abs(buf.z[..., 0] - d), np.nan)
     times = spec.dt * np.arange(1, T + 1)
-    err = align_estimates(spec, times, pos, truth) - truth
-    return {"err": err, "times": times, "weights": weights, "range_err": range_err, "valid": valid,
-            "step_ms": 1e3 * spent / T}
+    err = align_estimates(spec, times, steps.pos, steps.truth) - steps.truth
+    return {"err": err, "times": times, "weights": steps.weights, "range_err": steps.range_err,
+            "valid": steps.valid, "step_ms": 1e3 * steps.spent / T}
 
 
 def paired(a: np.ndarray, b: np.ndarray, claim: str) -> dict:

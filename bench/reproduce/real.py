@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.bench.reports.markdown import markdown_table, report_path
+from swarmloc.agents.registry import LoadedMethod
+from swarmloc.bench.evaluation.episode import EpisodeBatch, StepRecord, fly_episodes
 from swarmloc.bench.evaluation.suites import REAL_V1_TASKS, TEST_SEED_START, Suite, get_suite
+from swarmloc.bench.reports.markdown import markdown_table, report_path
 from swarmloc.bench.reproduce.common import write_paper_report
 
 #: the simulated twin of the TDOA flights (what a TDOA method would train on)
@@ -72,6 +74,30 @@ def _subset(name: str, tasks: tuple[str, ...], seeds: int) -> Suite:
     return Suite(name, "1", episodes, f"{name}: {len(tasks)} task(s) × {seeds} test seed(s)")
 
 
+class _WithoutGross:
+    """The line-of-sight diagnosis flown through the episode loop: a Track A trust and an observer of its updates.
+
+    Trust 0 for the range differences whose systematic error (the world's: the truth
+    decides, so a diagnosis, never a method) exceeds ``GROSS``, 1 elsewhere; keeps the
+    squared position error of every update.
+    """
+
+    flops_per_channel = 0.0
+
+    def begin(self, batch: EpisodeBatch) -> None:
+        self.world, self.sq = batch.world, []
+
+    def reset(self, batch_size: int, layout: Any, keys: np.ndarray) -> None:
+        pass
+
+    def act(self, inp: Any) -> np.ndarray:
+        gross = np.abs(self.world.buffers.systematic[..., 0]) > GROSS
+        return np.where(gross, 0.0, 1.0)
+
+    def observe(self, r: StepRecord) -> None:
+        self.sq.append(float(np.sum((r.estimate - r.truth) ** 2)))
+
+
 def flight_diagnostics(task: str, overrides: dict | None = None) -> dict[str, Any]:
     """The filtering rules' counts and the residual statistics of one real TDOA flight (privileged: truth).
 
@@ -79,26 +105,21 @@ def flight_diagnostics(task: str, overrides: dict | None = None) -> dict[str, An
     first test seed when the range differences whose residual exceeds ``GROSS`` are left
     out (the truth decides: a diagnosis, not a method).
     """
-    from swarmloc.envs.world.core import LinkTrustCore
     from swarmloc.envs.tasks.catalogue import get_spec
 
     spec = get_spec(task, **(overrides or {}))
-    core = LinkTrustCore(spec, 1)
-    rec = core.world.recording
+    diagnosis = _WithoutGross()
+    loaded = LoadedMethod(name="uniform-without-gross", entry_point="uniform-without-gross", track="A",
+                          privileged=False, deterministic=True, method=diagnosis)
+    rec = fly_episodes(loaded, spec, [TEST_SEED_START], [diagnosis]).world.recording
     e = rec.residual[1:][rec.valid[1:]]
-    core.reset([TEST_SEED_START])
-    sq = []
-    for _ in range(spec.n_steps):
-        gross = np.abs(core.world.buffers.systematic[..., 0]) > GROSS
-        step = core.step(np.where(gross, 0.0, 1.0))
-        sq.append(float(np.sum((step.estimate - step.truth) ** 2)))
     c = rec.counts
     return {"logged": c.logged, "impossible": c.impossible, "outside": c.outside, "off_layout": c.off_layout,
             "superseded": c.superseded, "used": c.used,
             "robust_std": float(1.4826 * np.median(np.abs(e - np.median(e)))) if e.size else None,
             "gross_share": float(np.mean(np.abs(e) > GROSS)) if e.size else None,
             "fault_label_share": float(rec.label[1:].sum() / max(rec.valid[1:].sum(), 1)),
-            "uniform_without_gross": float(np.sqrt(np.mean(sq))), "sigma": spec.sensors.tdoa.sigma,
+            "uniform_without_gross": float(np.sqrt(np.mean(diagnosis.sq))), "sigma": spec.sensors.tdoa.sigma,
             "imu_sigma": spec.sensors.imu_sigma, "channels": spec.n_channels}
 
 
