@@ -13,6 +13,7 @@ from swarmloc.bench.scoring.bootstrap import DEFAULT_RESAMPLES
 if TYPE_CHECKING:
     from rich.console import Console
 
+    from swarmloc.bench.evaluation.results import Results
     from swarmloc.bench.scoring.compare import Comparison
 
 
@@ -20,10 +21,11 @@ if TYPE_CHECKING:
 class Options:
     """Compare two results files of one suite episode by episode (B against A, paired CIs)."""
 
-    a: tyro.conf.Positional[Path]
-    """Results file of the reference (baseline), from `swarmloc evaluate`."""
-    b: tyro.conf.Positional[Path]
-    """Results file compared with it (same suite)."""
+    a: tyro.conf.Positional[str]
+    """Results file of the reference (baseline), from `swarmloc evaluate`; or `shipped:<method>`, the
+    shipped results of a reference method on the other file's suite (e.g. `shipped:cusum`)."""
+    b: tyro.conf.Positional[str]
+    """Results file compared with it (same suite); or `shipped:<method>`."""
     resamples: int = DEFAULT_RESAMPLES
     """Bootstrap resamples of the paired CIs (the leaderboard's default)."""
     json: Path | None = None
@@ -65,6 +67,38 @@ def print_comparison(c: Comparison, console: Console) -> None:
         console.print(f"left out: {task} ({why})")
 
 
+SHIPPED = "shipped:"
+
+
+def _load_pair(a: str, b: str) -> tuple[Results, Results]:
+    """Read both results, each once; a ``shipped:<method>`` side is the shipped file of that method on
+    the other side's suite (``standard-v1`` when both are shipped).
+
+    Raises:
+        KeyError: the suite has no shipped results, or the method none on it (the allowed ones named).
+    """
+    from swarmloc.bench.evaluation.results import load_results
+    from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE, RESULTS_DIRS, shipped_results
+
+    def shipped(text: str, suite: str) -> Path:
+        method = text.removeprefix(SHIPPED)
+        if suite not in RESULTS_DIRS:
+            raise KeyError(f"{text!r}: suite {suite!r} has no shipped results; those of {', '.join(RESULTS_DIRS)} do")
+        known = [p.stem for p in shipped_results(RESULTS_DIRS[suite])]
+        if method not in known:
+            raise KeyError(f"{text!r}: no shipped results of {method!r} on {suite}; shipped: {', '.join(known)}")
+        return RESULTS_DIRS[suite] / f"{method}.json"
+
+    a, b = str(a), str(b)
+    if a.startswith(SHIPPED) and b.startswith(SHIPPED):
+        return load_results(shipped(a, DEFAULT_SUITE)), load_results(shipped(b, DEFAULT_SUITE))
+    if a.startswith(SHIPPED):
+        rb = load_results(Path(b))
+        return load_results(shipped(a, rb.suite.name)), rb
+    ra = load_results(Path(a))
+    return ra, load_results(shipped(b, ra.suite.name)) if b.startswith(SHIPPED) else load_results(Path(b))
+
+
 def run(opts: Options, console: Console | None = None) -> int:
     """Print the comparison; 2 when a file is invalid or the two cannot be paired."""
     import json
@@ -75,7 +109,6 @@ def run(opts: Options, console: Console | None = None) -> int:
 
     from swarmloc.bench.common.files import write_text_atomic
     from swarmloc.bench.scoring.compare import compare, comparison_dict
-    from swarmloc.bench.evaluation.results import load_results
 
     # piped output has no terminal width to fit: lay the table out for the width it needs
     console = console or (Console() if sys.stdout.isatty() else Console(width=PIPED_WIDTH))
@@ -83,9 +116,10 @@ def run(opts: Options, console: Console | None = None) -> int:
         console.print(Text(f"error: --resamples must be >= 1, got {opts.resamples}", style="bold red"))
         return 2
     try:
-        comparison = compare(load_results(opts.a), load_results(opts.b), n_resamples=opts.resamples)
-    except ValueError as err:  # ResultsFileError is one
-        console.print(Text(f"error: {err}", style="bold red"))
+        a, b = _load_pair(opts.a, opts.b)
+        comparison = compare(a, b, n_resamples=opts.resamples)
+    except (ValueError, KeyError) as err:  # ResultsFileError is a ValueError
+        console.print(Text(f"error: {err.args[0] if isinstance(err, KeyError) else err}", style="bold red"))
         return 2
     for label, path, name in (("A", opts.a, comparison.name_a), ("B", opts.b, comparison.name_b)):
         console.print(Text(f"{label}: {name} ({path})"))

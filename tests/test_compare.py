@@ -128,3 +128,24 @@ def test_the_command_refuses_bad_input_with_status_2(tmp_path, problem):
     expected = {"resamples": "--resamples must be >= 1, got 0", "missing": "does not exist",
                 "suite": "different suites"}[problem]
     assert expected in console.export_text() and not (tmp_path / "cmp.json").exists()
+
+
+def test_shipped_names_the_shipped_results_of_the_other_files_suite(tmp_path):
+    """``shipped:<method>`` reads the packaged results of a reference method on the other side's suite
+    (standard-v1 when both are shipped), so the README's comparison works from an installed wheel too."""
+    from swarmloc.bench.evaluation.results import load_results
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
+
+    console = Console(record=True, width=300)
+    assert cli.run(cli.Options(a="shipped:uniform", b="shipped:cusum"), console) == 0
+    text = console.export_text()
+    assert "A: uniform (shipped:uniform)" in text and "B: cusum (shipped:cusum)" in text
+    assert "B against A on standard-v1" in text and "verdict: B is ahead beyond doubt" in text
+    mine = tmp_path / "mine.json"
+    mine.write_text((RESULTS_DIRS["standard-v0"] / "chi2-soft.json").read_text())
+    a, b = cli._load_pair("shipped:uniform", str(mine))
+    assert a.suite.name == b.suite.name == "standard-v0"
+    assert a == load_results(RESULTS_DIRS["standard-v0"] / "uniform.json")
+    console = Console(record=True, width=300)
+    assert cli.run(cli.Options(a="shipped:nope", b=str(mine)), console) == 2
+    assert "no shipped results of 'nope' on standard-v0; shipped: " in console.export_text()
