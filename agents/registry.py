@@ -114,6 +114,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A",
                 "privileged: α_min on channels with an error label (the trust ceiling)", privileged=True),
+    MethodEntry("centralized-oracle", "swarmloc.agents.estimators.centralized:centralized_oracle", "B",
+                "privileged: one EKF over the swarm's joint state, error-labelled channels left out", privileged=True),
 )}
 
 #: the reference of the score: every episode's gain is log2(RMSE of uniform / RMSE) on the same episode

@@ -1,0 +1,331 @@
+"""``centralized-oracle``: one EKF over the joint state of the whole swarm (privileged Track B reference).
+
+Where the CEKF backbone runs one 6-state EKF per UAV and fuses a neighbour's broadcast estimate
+(as a known point, or by covariance intersection), this estimator keeps the swarm's joint state
+and its full covariance, as a fusion centre that receives every measurement would. It is the
+achievable reference that shows what decentralization costs (docs/methods.md).
+
+**State.** x = [p_1 … p_N, v_1 … v_N] (6N), positions first so that every channel, which measures
+positions only, reads the leading 3N block; P is the full 6N × 6N covariance with every
+cross-covariance between UAVs. The per-UAV CEKF carries no other state (the world's per-episode
+accelerometer bias is not in it, nor in the public facts), so neither does this filter.
+
+**Prediction**, every UAV with its own IMU reading u_i, exactly the CEKF's model
+(``cekf_reference.transition``): x_i⁻ = F x_i + G u_i, and for the joint covariance, with
+F = [[I, dt·I], [0, I]] per UAV and Q = σ_imu² G Gᵀ independent between UAVs,
+
+    P_pp⁻ = P_pp + dt (P_pv + P_vp) + dt² P_vv + q_pp I,   P_pv⁻ = P_pv + dt P_vv + q_pv I,   P_vv⁻ = P_vv + q_vv I
+
+(the 3N × 3N blocks of P; q the entries of G Gᵀ σ_imu²): O((6N)²), no 6N × 6N product.
+
+**Update**, at the prior x⁻, with every valid channel of every UAV that the episode does not
+label faulty. Each channel is a measurement of the joint state with the nominal R0 (trust 1):
+
+| kind | h(x) | ∂h/∂p_i | ∂h/∂p_j |
+|---|---|---|---|
+| anchor | ‖p_i − a‖ | uᵀ | — |
+| TDOA (a, b) | ‖p_i − a_b‖ − ‖p_i − a_a‖ | u_bᵀ − u_aᵀ | — |
+| GPS | p_i | I | — |
+| landmark | m − p_i | −I | — |
+| peer range | ‖p_i − p_j‖ | uᵀ | −uᵀ |
+| peer relative position | p_j − p_i | −I | I |
+
+A peer link is a true joint measurement: its Jacobian has a block for both UAVs, and the joint
+covariance holds their correlation, so nothing is counted twice (UAV i's channel to j and j's
+channel to i are two independent measurements, each used once). The rows are linearised at
+the same prior and R is diagonal, so their information adds up in the 3N × 3N position block,
+
+    Λ = Σ_c H_cᵀ R_c⁻¹ H_c,   η = Σ_c H_cᵀ R_c⁻¹ y_c,   y_c = z_c − h_c(x⁻),
+
+and, with A = P_pp⁻ and P_·p = P⁻ Eᵀ (the columns of the positions), the push-through identity
+Hᵀ (H A Hᵀ + R)⁻¹ = (I + Λ A)⁻¹ Hᵀ R⁻¹ turns the m-row update (m up to N·L·3) into a 3N × 3N one:
+
+    W = (I + Λ A)⁻¹,   M = W Λ,   K H = P_·p M E,   K y = P_·p W η,
+    x⁺ = x⁻ + P_·p W η,
+    P⁺ = (I − K H) P⁻ (I − K H)ᵀ + K R Kᵀ = P⁻ + P_·p (M A Mᵀ + W Λ Wᵀ − M − Mᵀ) P_·pᵀ
+
+(the Joseph form written through M and W, so it stays positive semi-definite for the computed
+gain; P is symmetrized after). It equals the CEKF's joint update for one UAV
+(``tests/test_centralized.py``).
+
+**Excluded.** A channel whose error label is set (``PrivilegedInfo.error_labels``: the
+measurement's own systematic error, NLOS bias or GPS drift or heavy-tail excess, above k·σ,
+``envs/world/labels.py``) does not enter; that is the set the information bound leaves out
+(``bound.bound_labels``). The injected-fault labels also mark a peer link to a neighbour in an
+IMU fault window; a joint filter estimates that neighbour itself, so the range is informative
+and stays. Not modelled (as in the CEKF): the accelerometer bias and IMU-fault biases, visual
+odometry (``Measurements.velocity``).
+
+**Cost** per step and episode: the prediction O((6N)²), the channel rows O(N·L), the update two
+3N × 3N inversions and products (≈ 8 (3N)³) and P_·p D P_·pᵀ (≈ 2·6N·(3N)² + 2·(6N)²·3N), in
+all ≈ 17·(3N)³ flops: 0.2 MFLOP at N = 8, 15 MFLOP at N = 32. Memory B·(6N)² floats (B = 8, N = 32:
+3 MB). ``flops`` reports the whole swarm's count divided evenly among its UAVs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmloc.envs.filter.cekf_reference import transition
+from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
+
+from swarmloc.agents.estimators.dead_reckoning import cekf_prior
+from swarmloc.agents.protocols import EstimatorOutput, Measurements, PrivilegedInfo, TaskFacts
+
+#: a range shorter than this has no direction: the channel is skipped (as the CEKF does)
+_MIN_RANGE = 1e-9
+_RANGE_KINDS = (ANCHOR, PEER, TDOA)
+_PEER_KINDS = (PEER, PEER_REL)
+
+
+class JointLayout:
+    """The static geometry of a task's channels, precomputed once per reset.
+
+    Args:
+        kind, target: ``(N, L)`` channel kinds and targets (``TaskFacts``).
+        sigma: ``(N, L)`` nominal std per scalar row [m].
+        anchors: ``(A, 3)``; landmarks: ``(M, 3)``.
+
+    Attributes:
+        kind: ``(N, L)``; scalar: ``(N, L)`` bool, a one-row (range or TDOA) channel.
+        rows: ``(N, L, 3)`` 1 on the rows a channel has (row 0 for a scalar channel, all 3 otherwise).
+        inv_r: ``(N, L, 3)`` R0⁻¹ per row (0 on absent rows).
+        point: ``(N, L, 3)`` the fixed point of an anchor range (a), a landmark (m) or a TDOA's first anchor (a_a).
+        point_b: ``(N, L, 3)`` a TDOA's second anchor a_b (zero elsewhere).
+        own_sign: ``(N, L)`` the sign of ∂h/∂p_i of a vector channel (GPS +1, landmark and relative −1).
+        peer: ``(N, L)`` the neighbour's index of a peer channel (0 elsewhere, masked by ``link``).
+        link: ``(N, L, N)`` one-hot: channel l of UAV i measures neighbour j.
+    """
+
+    def __init__(self, kind: np.ndarray, target: np.ndarray, sigma: np.ndarray, anchors: np.ndarray,
+                 landmarks: np.ndarray) -> None:
+        n, n_l = kind.shape
+        self.kind = np.asarray(kind, dtype=np.int64)
+        self.scalar = np.isin(self.kind, _RANGE_KINDS)
+        self.rows = np.ones((n, n_l, 3))
+        self.rows[self.scalar, 1:] = 0.0
+        self.inv_r = self.rows / (np.asarray(sigma, dtype=np.float64) ** 2)[..., None]
+        self.point = np.zeros((n, n_l, 3))
+        self.point_b = np.zeros((n, n_l, 3))
+        self.own_sign = np.where(self.kind == GPS, 1.0, -1.0)
+        self.peer = np.zeros((n, n_l), dtype=np.int64)
+        self.link = np.zeros((n, n_l, n))
+        for i in range(n):
+            for l in range(n_l):
+                k, t = int(self.kind[i, l]), int(target[i, l])
+                if k == ANCHOR:
+                    self.point[i, l] = anchors[t]
+                elif k == LANDMARK:
+                    self.point[i, l] = landmarks[t]
+                elif k == TDOA:
+                    a, b = tdoa_pair(t, len(anchors))
+                    self.point[i, l], self.point_b[i, l] = anchors[a], anchors[b]
+                elif k in _PEER_KINDS:
+                    self.peer[i, l] = t
+                    self.link[i, l, t] = 1.0
+
+
+def predict_joint(x: np.ndarray, P: np.ndarray, imu: np.ndarray, dt: float, imu_sigma: float) -> tuple[np.ndarray,
+                                                                                                       np.ndarray]:
+    """Propagate the joint state with every UAV's IMU (the module docstring's prediction).
+
+    Args:
+        x: ``(B, N, 6)`` mean [p, v] per UAV.
+        P: ``(B, 6N, 6N)`` joint covariance, positions first.
+        imu: ``(B, N, 3)`` accelerometer readings; dt: step [s]; imu_sigma: σ_imu [m/s²].
+
+    Returns:
+        (x⁻, P⁻), new arrays.
+    """
+    F, G = transition(dt)
+    n3 = P.shape[-1] // 2
+    # x⁻ = F x + G u, UAV by UAV
+    x_prior = x @ F.T + imu @ G.T
+    # Q = σ_imu² G Gᵀ: per axis q_pp, q_pv, q_vv, the same for every UAV and independent between them
+    Q = imu_sigma**2 * G @ G.T
+    eye = np.eye(n3)
+    A, Bm, V = P[:, :n3, :n3], P[:, :n3, n3:], P[:, n3:, n3:]
+    # P⁻ = F P Fᵀ + Q on the 3N × 3N blocks (F = [[I, dt·I], [0, I]])
+    A_prior = A + dt * (Bm + Bm.transpose(0, 2, 1)) + dt * dt * V + Q[0, 0] * eye
+    B_prior = Bm + dt * V + Q[0, 3] * eye
+    V_prior = V + Q[3, 3] * eye
+    P_prior = np.concatenate([np.concatenate([A_prior, B_prior], axis=2),
+                              np.concatenate([B_prior.transpose(0, 2, 1), V_prior], axis=2)], axis=1)
+    return x_prior, P_prior
+
+
+def channel_information(p: np.ndarray, z: np.ndarray, use: np.ndarray,
+                        layout: JointLayout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Information of the used channels in the position block: Λ = Σ Hᵀ R⁻¹ H and η = Σ Hᵀ R⁻¹ y.
+
+    Args:
+        p: ``(B, N, 3)`` prior positions.
+        z: ``(B, N, L, 3)`` measurements (ranges in component 0).
+        use: ``(B, N, L)`` bool, the channels that enter.
+        layout: the task's ``JointLayout``.
+
+    Returns:
+        (Λ ``(B, 3N, 3N)``, η ``(B, 3N)``, used ``(B, N, L)`` bool: ``use`` less degenerate ranges).
+    """
+    n_b, n, n_l = use.shape
+    kind = layout.kind
+    # the other end of a range: an anchor, or the neighbour's prior position
+    other = np.where((kind == PEER)[None, :, :, None], p[:, layout.peer], layout.point[None])
+    d = p[:, :, None, :] - other
+    rng = np.linalg.norm(d, axis=-1)
+    # TDOA: the second anchor's range, h = ‖p − a_b‖ − ‖p − a_a‖
+    d_b = p[:, :, None, :] - layout.point_b[None]
+    rng_b = np.linalg.norm(d_b, axis=-1)
+    tdoa = (kind == TDOA)[None]
+    used = use & ~(layout.scalar[None] & (rng < _MIN_RANGE)) & ~(tdoa & (rng_b < _MIN_RANGE))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = d / rng[..., None]
+        u_b = d_b / rng_b[..., None]
+    # J: ∂h/∂p_i, one row (a range: uᵀ; TDOA: u_bᵀ − u_aᵀ) or three (±I); y = z − h(x⁻)
+    J = np.zeros((n_b, n, n_l, 3, 3))
+    y = np.zeros((n_b, n, n_l, 3))
+    scalar = layout.scalar[None]
+    J[..., 0, :] = np.where(tdoa[..., None], u_b - u, u)
+    y[..., 0] = z[..., 0] - np.where(tdoa, rng_b - rng, rng)
+    vec = ~scalar
+    J_vec = layout.own_sign[None, :, :, None, None] * np.eye(3)
+    # GPS: h = p; landmark: h = m − p; relative position: h = p_j − p
+    target_pos = np.where((kind == PEER_REL)[None, :, :, None], p[:, layout.peer], layout.point[None])
+    p_own = p[:, :, None, :]
+    h_vec = np.where((kind == GPS)[None, :, :, None], p_own, target_pos - p_own)
+    J = np.where(vec[..., None, None], J_vec, J)
+    y = np.where(vec[..., None], z - h_vec, y)
+    w = np.where(used[..., None], layout.inv_r[None], 0.0)
+    J = np.where(used[..., None, None], J, 0.0)  # a skipped channel's NaN direction must not reach a sum
+    y = np.where(used[..., None], y, 0.0)
+    # per channel: Hᵢᵀ R⁻¹ Hᵢ and Hᵢᵀ R⁻¹ y in UAV i's block; ∂h/∂p_j = −∂h/∂p_i for both peer kinds
+    info = np.einsum("bnlrx,bnlr,bnlry->bnlxy", J, w, J)
+    grad = np.einsum("bnlrx,bnlr,bnlr->bnlx", J, w, y)
+    cross = np.einsum("ilj,bilxy->bijxy", layout.link, info)  # Σ over i's channels to j
+    blocks = -cross - cross.transpose(0, 2, 1, 4, 3)
+    diag = info.sum(axis=2) + cross.sum(axis=1)
+    idx = np.arange(n)
+    blocks[:, idx, idx] += diag
+    eta = grad.sum(axis=2) - np.einsum("ilj,bilx->bjx", layout.link, grad)
+    Lam = blocks.transpose(0, 1, 3, 2, 4).reshape(n_b, 3 * n, 3 * n)
+    return Lam, eta.reshape(n_b, 3 * n), used
+
+
+def update_joint(x: np.ndarray, P: np.ndarray, Lam: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joint EKF update from the channels' information (the module docstring's update).
+
+    Args:
+        x: ``(B, N, 6)`` prior mean; P: ``(B, 6N, 6N)`` prior covariance, positions first.
+        Lam: ``(B, 3N, 3N)`` Σ Hᵀ R⁻¹ H; eta: ``(B, 3N)`` Σ Hᵀ R⁻¹ y, both at the prior.
+
+    Returns:
+        (x⁺, P⁺), new arrays.
+    """
+    n_b, n = x.shape[:2]
+    n3 = 3 * n
+    A = P[:, :n3, :n3]
+    Pp = P[:, :, :n3]
+    # W = (I + Λ A)⁻¹, M = W Λ (= Hᵀ S⁻¹ H, S = H A Hᵀ + R)
+    W = np.linalg.inv(np.eye(n3) + Lam @ A)
+    M = W @ Lam
+    # x⁺ = x⁻ + K y = x⁻ + P_·p W η
+    dx = (Pp @ (W @ eta[..., None]))[..., 0]
+    flat = np.concatenate([x[..., :3].reshape(n_b, n3), x[..., 3:].reshape(n_b, n3)], axis=1) + dx
+    x_post = np.concatenate([flat[:, :n3].reshape(n_b, n, 3), flat[:, n3:].reshape(n_b, n, 3)], axis=2)
+    # P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ = P + P_·p (M A Mᵀ + W Λ Wᵀ − M − Mᵀ) P_·pᵀ  (Joseph form)
+    Mt = M.transpose(0, 2, 1)
+    D = M @ A @ Mt + W @ Lam @ W.transpose(0, 2, 1) - M - Mt
+    P_post = P + Pp @ D @ Pp.transpose(0, 2, 1)
+    # symmetrize: the products above round differently on either side of the diagonal
+    P_post = 0.5 * (P_post + P_post.transpose(0, 2, 1))
+    return x_post, P_post
+
+
+def joint_flops(n_uav: int) -> float:
+    """FLOPs of one step of the joint filter for the whole swarm (the module docstring's count)."""
+    n3 = 3 * n_uav
+    predict = 10 * n3 * n3 + 18 * n_uav
+    update = 8 * n3**3 + 2 * (2 * n3) * n3 * n3 + 2 * (2 * n3) ** 2 * n3
+    return float(predict + update)
+
+
+class CentralizedOracle:
+    """One EKF over the swarm's joint state, with the error-labelled channels left out (privileged).
+
+    The runner hands the pending step's labels to ``observe_privileged`` before every ``step``;
+    ``step`` refuses to run without them, and uses them for that step only.
+    """
+
+    privileged = True
+    deterministic = True
+
+    def __init__(self) -> None:
+        self._facts: TaskFacts | None = None
+        self._labels: np.ndarray | None = None
+
+    def reset(self, facts: TaskFacts, x0: np.ndarray) -> None:
+        """Start B episodes at the prior ``x0`` ``(B, N, 6)`` with the CEKF's initial covariance, uncorrelated."""
+        x, P_uav = cekf_prior(facts, x0)
+        n_b, n = facts.batch_size, facts.n_uav
+        n3 = 3 * n
+        self.x = x
+        # P0: every UAV's CEKF prior on the diagonal blocks, positions first
+        P = np.zeros((n_b, 2 * n3, 2 * n3))
+        for i in range(n):
+            for a, rows in ((0, slice(3 * i, 3 * i + 3)), (1, slice(n3 + 3 * i, n3 + 3 * i + 3))):
+                for c, cols in ((0, slice(3 * i, 3 * i + 3)), (1, slice(n3 + 3 * i, n3 + 3 * i + 3))):
+                    P[:, rows, cols] = P_uav[:, i, 3 * a:3 * a + 3, 3 * c:3 * c + 3]
+        self.P = P
+        self.layout = JointLayout(facts.kind, facts.target, facts.sigma, facts.anchors, facts.landmarks)
+        self._facts = facts
+        self._labels = None
+        self._flops = np.full((n_b, n), joint_flops(n) / n)
+
+    def observe_privileged(self, info: PrivilegedInfo) -> None:
+        """Receive the pending measurements' error labels ``(B, N, L)`` (the channels to leave out)."""
+        if self._facts is None:
+            raise RuntimeError("call reset(facts, x0) before observe_privileged()")
+        if info.error_labels is None:
+            raise ValueError("centralized-oracle reads PrivilegedInfo.error_labels, which was not provided")
+        labels = np.asarray(info.error_labels, dtype=bool)
+        shape = (self._facts.batch_size, self._facts.n_uav, self._facts.n_channels)
+        if labels.shape != shape:
+            raise ValueError(f"error_labels must have shape (B, N, L) = {shape}, got {labels.shape}")
+        self._labels = labels.copy()
+
+    def step(self, meas: Measurements) -> EstimatorOutput:
+        """Predict the joint state with the IMU, update with every unlabelled valid channel.
+
+        Returns:
+            Positions, position covariances (the diagonal blocks of P), the trust applied
+            (0 on a labelled channel, 1 elsewhere) and FLOPs.
+
+        Raises:
+            RuntimeError: no labels for this step (not run as a privileged method).
+        """
+        f = self._facts
+        if f is None:
+            raise RuntimeError("call reset(facts, x0) before step()")
+        if self._labels is None:
+            raise RuntimeError("centralized-oracle needs observe_privileged(info) before every step(); "
+                               "run it through the swarmloc runner, which passes labels to privileged methods")
+        labels, self._labels = self._labels, None
+        imu = np.asarray(meas.imu, dtype=np.float64)
+        self.x, self.P = predict_joint(self.x, self.P, imu, f.dt, f.imu_sigma)
+        use = np.asarray(meas.valid, dtype=bool) & ~labels
+        Lam, eta, _ = channel_information(self.x[..., :3], np.asarray(meas.z, dtype=np.float64), use, self.layout)
+        self.x, self.P = update_joint(self.x, self.P, Lam, eta)
+        return EstimatorOutput(positions=self.x[..., :3].copy(), cov=self.position_cov(),
+                               weights=np.where(labels, 0.0, 1.0), flops=self._flops.copy())
+
+    def position_cov(self) -> np.ndarray:
+        """``(B, N, 3, 3)`` each UAV's position covariance (the diagonal 3 × 3 blocks of P's position block)."""
+        n_b, n = self.x.shape[:2]
+        idx = np.arange(n)
+        blocks = self.P[:, :3 * n, :3 * n].reshape(n_b, n, 3, n, 3)
+        return blocks[:, idx, :, idx, :].transpose(1, 0, 2, 3).copy()
+
+
+def centralized_oracle() -> CentralizedOracle:
+    """Registry factory: ``centralized-oracle``."""
+    return CentralizedOracle()
