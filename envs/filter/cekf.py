@@ -21,8 +21,13 @@ by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = hᵀ on p_i, −hᵀ
 i.e. the point update with R = ω r + ω hᵀP_j h/(1 − ω) followed by P ← P/ω. A relative
 position (z = p_j − p_i) is one 3-row block of the same form with S = A/ω + B/(1 − ω) + r I
 (A, B the two position covariances). ω minimises the trace of P_i⁺'s position block on a grid
-of ``CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
+of ``ekf_rows.CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
 neighbour's prior at this step (the broadcast one), read before any UAV updates.
+
+``peer_update = "split_ci"``: split covariance intersection of all of a UAV's peers of a step
+in one update, the prior rescaled once (``split_ci.py`` states the equations and sources).
+Each UAV carries the independent part N of its covariance beside P (``P_ind`` in the batch
+kernels); the absolute channels update as above and carry N through their gains.
 
 The kernel processes the joint update as a sequence of scalar rows, all linearised at the
 prior x⁻: for rows z_r = h_r(x⁻) + H_r (x − x⁻) + v_r with diagonal R, sequential linear
@@ -41,14 +46,16 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from swarmloc.envs.filter.ekf_rows import MIN_RANGE as _MIN_RANGE, joseph_part
+from swarmloc.envs.filter.ekf_rows import scalar_update as _scalar_update
+from swarmloc.envs.filter.peer_ci import ci_peers
+from swarmloc.envs.filter.split_ci import row_gain, split_ci_peers
 from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA
-from swarmloc.envs.world.cost import CI_RANGE_FLOPS, CI_REL_FLOPS, PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
+from swarmloc.envs.world.cost import PREDICT_FLOPS, RANGE_ROW_FLOPS, TDOA_ROW_FLOPS, VECTOR_ROW_FLOPS
+from swarmloc.envs.world.cost import SPLIT_PREDICT_FLOPS, SPLIT_TRACK_ROW_FLOPS
 
-_MIN_RANGE = 1e-9
-#: the covariance intersection's weight ω is searched on {1/CI_GRID, …, (CI_GRID − 1)/CI_GRID} and 1
-CI_GRID = 50
 #: ``FilterSettings.peer_update`` as the kernels' integer code
-PEER_UPDATE_CODES = {"point": 0, "ci": 1}
+PEER_UPDATE_CODES = {"point": 0, "ci": 1, "split_ci": 2}
 
 
 @njit(cache=True, inline="always")
@@ -59,6 +66,13 @@ def predict_uav(x, P, u, dt, q):
         # p⁻ = p + dt·v + dt²/2·u ;  v⁻ = v + dt·u
         x[d] = x[d] + dt * x[3 + d] + h2 * u[d]
         x[3 + d] = x[3 + d] + dt * u[d]
+    predict_covariance(P, dt, q)
+
+
+@njit(cache=True, inline="always")
+def predict_covariance(P, dt, q):
+    """In-place P⁻ = F P Fᵀ + Q (Q = q·G Gᵀ): a UAV's covariance, or its independent part under ``"split_ci"``."""
+    h2 = 0.5 * dt * dt
     # F P Fᵀ with F = [[I, dt I], [0, I]] on blocks A = P_pp, B = P_pv, C = P_vv:
     #   A⁻ = A + dt (B + Bᵀ) + dt² C,  B⁻ = B + dt C,  C⁻ = C
     for r in range(3):
@@ -77,138 +91,8 @@ def predict_uav(x, P, u, dt, q):
 
 
 @njit(cache=True, inline="always")
-def _scalar_update(x, P, hvec, col, y, r, c):
-    """One scalar row: H = hvec on the position block (or e_col if col >= 0)."""
-    # c = P Hᵀ
-    if col >= 0:
-        for a in range(6):
-            c[a] = P[a, col]
-        s = c[col] + r  # s = H P Hᵀ + r
-    else:
-        for a in range(6):
-            c[a] = P[a, 0] * hvec[0] + P[a, 1] * hvec[1] + P[a, 2] * hvec[2]
-        s = c[0] * hvec[0] + c[1] * hvec[1] + c[2] * hvec[2] + r
-    # x ← x + k y, k = c / s
-    g = y / s
-    for a in range(6):
-        x[a] += c[a] * g
-    # P ← P − c cᵀ / s (upper triangle, mirrored: exact symmetry)
-    inv_s = 1.0 / s
-    for a in range(6):
-        for b2 in range(a, 6):
-            v = P[a, b2] - c[a] * c[b2] * inv_s
-            P[a, b2] = v
-            P[b2, a] = v
-
-
-@njit(cache=True, inline="always")
-def _scale_cov(P, inv_w):
-    """P ← P / ω."""
-    for a in range(6):
-        for b2 in range(6):
-            P[a, b2] *= inv_w
-
-
-@njit(cache=True, inline="always")
-def _ci_range_row(x, P, hvec, Pj, y, r, c):
-    """One peer range by covariance intersection (module docstring). Returns ω (1: no update)."""
-    a = 0.0  # hᵀ P_i h
-    b = 0.0  # hᵀ P_j h
-    cc = 0.0  # ‖(P_i h)_pos‖²
-    for u in range(3):
-        cu = 0.0
-        for v in range(3):
-            a += hvec[u] * P[u, v] * hvec[v]
-            b += hvec[u] * Pj[u, v] * hvec[v]
-            cu += P[u, v] * hvec[v]
-        cc += cu * cu
-    tr = P[0, 0] + P[1, 1] + P[2, 2]
-    # tr of P⁺'s position block: (tr − ‖(P h)_pos‖² / (ω S)) / ω; ω = 1 is no update (tr)
-    best, best_w = tr, 1.0
-    for k in range(1, CI_GRID):
-        w = k / CI_GRID
-        f = (tr - cc / (a + w * r + w * b / (1.0 - w))) / w
-        if f < best:
-            best, best_w = f, w
-    if best_w < 1.0:
-        _scalar_update(x, P, hvec, -1, y, best_w * r + best_w * b / (1.0 - best_w), c)
-        _scale_cov(P, 1.0 / best_w)
-    return best_w
-
-
-@njit(cache=True, inline="always")
-def _inv3(S, out):
-    """out = S⁻¹ of a symmetric positive definite 3×3 (adjugate over determinant)."""
-    out[0, 0] = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
-    out[0, 1] = S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]
-    out[0, 2] = S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]
-    out[1, 0] = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
-    out[1, 1] = S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]
-    out[1, 2] = S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]
-    out[2, 0] = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
-    out[2, 1] = S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]
-    out[2, 2] = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    det = S[0, 0] * out[0, 0] + S[0, 1] * out[1, 0] + S[0, 2] * out[2, 0]
-    for u in range(3):
-        for v in range(3):
-            out[u, v] /= det
-
-
-@njit(cache=True, inline="always")
-def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
-    """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω.
-
-    S, Si: scratch 3×3; K: scratch 6×3; top: scratch 3×6.
-    """
-    tr = P[0, 0] + P[1, 1] + P[2, 2]
-    best, best_w = tr, 1.0
-    for k in range(1, CI_GRID):
-        w = k / CI_GRID
-        for u in range(3):
-            for v in range(3):
-                S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
-        _inv3(S, Si)
-        # tr(A S⁻¹ A) with A = P_pp (symmetric)
-        t = 0.0
-        for u in range(3):
-            for v in range(3):
-                av = 0.0
-                for q in range(3):
-                    av += Si[u, q] * P[q, v]
-                t += P[v, u] * av
-        f = tr / w - t / (w * w)
-        if f < best:
-            best, best_w = f, w
-    if best_w >= 1.0:
-        return 1.0
-    w = best_w
-    for u in range(3):
-        for v in range(3):
-            S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
-    _inv3(S, Si)
-    _scale_cov(P, 1.0 / w)
-    # K = P[:, :3] S⁻¹ (on the scaled P), y = m − p
-    for a in range(6):
-        for v in range(3):
-            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
-    y0, y1, y2 = m[0] - x[0], m[1] - x[1], m[2] - x[2]
-    for a in range(6):
-        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
-    # P ← P − K P[:3, :] (upper triangle, mirrored; P[:3, :] read from a copy)
-    for u in range(3):
-        for v in range(6):
-            top[u, v] = P[u, v]
-    for a in range(6):
-        for b2 in range(a, 6):
-            v = P[a, b2] - (K[a, 0] * top[0, b2] + K[a, 1] * top[1, b2] + K[a, 2] * top[2, b2])
-            P[a, b2] = v
-            P[b2, a] = v
-    return w
-
-
-@njit(cache=True, inline="always")
 def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos, prior_pp, peer_update,
-               alpha_th, alpha_min, active, x0, hvec, c):
+               alpha_th, alpha_min, active, x0, hvec, c, P_ind, b, i, prior_ind_pp, work):
     """Trust-weighted joint update of one UAV over its L channels (in place).
 
     Args:
@@ -216,10 +100,15 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
         z: ``(L, 3)`` measurements; valid, alpha: ``(L,)``.
         kind, target, r0: ``(L,)`` static channel description.
         anchors ``(A, 3)``, landmarks ``(M, 3)``, prior_pos ``(N, 3)`` broadcast priors.
-        prior_pp: ``(N, 3, 3)`` the broadcast priors' position covariances (read by ``"ci"``).
+        prior_pp: ``(N, 3, 3)`` the broadcast priors' position covariances (read by ``"ci"`` and ``"split_ci"``).
         peer_update: ``PEER_UPDATE_CODES`` of ``FilterSettings.peer_update``.
         active: ``(L,)`` output, whether the channel was used.
         x0, hvec, c: scratch 6-, 3-, 6-vectors.
+        P_ind, b, i: ``"split_ci"``: ``P_ind[b, i]`` ``(6, 6)`` is the UAV's independent part of P (prior in,
+            posterior out); unread otherwise (any 4-d float array: no view is made, which the point update's
+            speed notices).
+        prior_ind_pp: ``(N, 3, 3)`` ``"split_ci"``: the broadcast priors' independent position parts.
+        work: ``(8, 6)`` scratch (``"split_ci"``: this step's own-noise part, a gain, a vector).
 
     Returns:
         FLOPs of the step for this UAV (prediction + the rows applied, see ``cost.py``).
@@ -227,6 +116,11 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
     flops = PREDICT_FLOPS
     for a in range(6):
         x0[a] = x[a]
+    split = peer_update == 2
+    if split:
+        flops += SPLIT_PREDICT_FLOPS
+        # N_new, this step's own measurement noise, starts at 0 (split_ci.py)
+        work[:6, :] = 0.0
     for l in range(kind.shape[0]):
         al = alpha[l]
         use = valid[l] and al > alpha_th
@@ -237,8 +131,8 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
         r = r0[l] / max(al, alpha_min)
         ch = kind[l]
         j = target[l]
-        if peer_update == 1 and (ch == PEER or ch == PEER_REL):
-            continue  # "ci": the peer channels after the absolute ones (_ci_peers)
+        if peer_update >= 1 and (ch == PEER or ch == PEER_REL):
+            continue  # "ci", "split_ci": the peer channels after the absolute ones (ci_peers, split_ci_peers)
         if ch == ANCHOR or ch == PEER:
             if ch == ANCHOR:
                 q0, q1, q2 = anchors[j, 0], anchors[j, 1], anchors[j, 2]
@@ -255,6 +149,8 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             # H enters as +hvec; _scalar_update uses hvec when col < 0
             _scalar_update(x, P, hvec, -1, y, r, c)
             flops += RANGE_ROW_FLOPS
+            if split:
+                flops += _track_split(P_ind[b, i], work, c, hvec, -1, r)
         elif ch == TDOA:
             # the pair (i, j) of target code j = i·A + j': h = ‖p − a_j'‖ − ‖p − a_i‖
             n_a = anchors.shape[0]
@@ -272,6 +168,8 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
                                        + hvec[2] * (x[2] - x0[2]))
             _scalar_update(x, P, hvec, -1, y, r, c)
             flops += TDOA_ROW_FLOPS
+            if split:
+                flops += _track_split(P_ind[b, i], work, c, hvec, -1, r)
         else:
             for d in range(3):
                 if ch == GPS:
@@ -284,110 +182,129 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
                     y = -(z[l, d] - qd + x[d])  # sign folded: update along +e_d with −y
                     _scalar_update(x, P, hvec, d, y, r, c)
                 flops += VECTOR_ROW_FLOPS
+                if split:
+                    flops += _track_split(P_ind[b, i], work, c, hvec, d, r)
         active[l] = True
     if peer_update == 1:
-        flops += _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active,
-                           x0, hvec, c)
+        flops += ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active,
+                          x0, hvec, c)
+    elif split:
+        flops += split_ci_peers(x, P, P_ind[b, i], work, z, valid, alpha, kind, target, r0, prior_pos, prior_pp,
+                                prior_ind_pp,
+                                alpha_th, alpha_min, active, x0, c)
     return flops
 
 
-@njit(cache=True)
-def _ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha_th, alpha_min, active, x0, hvec, c):
-    """The peer channels of one UAV by covariance intersection, in channel order (after its absolute
-    channels; the arguments as ``update_uav``'s). Returns their FLOPs."""
-    flops = 0
-    S, Si, K, top = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((3, 6))
-    for l in range(kind.shape[0]):
-        ch = kind[l]
-        if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):
-            continue
-        r = r0[l] / max(alpha[l], alpha_min)
-        j = target[l]
-        if ch == PEER_REL:
-            for d in range(3):
-                hvec[d] = prior_pos[j, d] - z[l, d]  # m = p̂_j − z, a measurement of p_i
-            _ci_rel_block(x, P, prior_pp[j], hvec, r, S, Si, K, top)
-            flops += CI_REL_FLOPS
-        else:
-            d0, d1, d2 = x0[0] - prior_pos[j, 0], x0[1] - prior_pos[j, 1], x0[2] - prior_pos[j, 2]
-            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            if rng < _MIN_RANGE:
-                continue
-            # at the prior, as every row: H = (p⁻ − p̂_j)ᵀ/‖p⁻ − p̂_j‖, y = z − h(x⁻) − H (x − x⁻)
-            hvec[0], hvec[1], hvec[2] = d0 / rng, d1 / rng, d2 / rng
-            y = z[l, 0] - rng - (hvec[0] * (x[0] - x0[0]) + hvec[1] * (x[1] - x0[1]) + hvec[2] * (x[2] - x0[2]))
-            _ci_range_row(x, P, hvec, prior_pp[j], y, r, c)
-            flops += RANGE_ROW_FLOPS + CI_RANGE_FLOPS
-        active[l] = True
-    return flops
+@njit(cache=True, inline="always")
+def _track_split(N, work, c, hvec, col, r):
+    """``"split_ci"``: both independent parts through the absolute row just applied (split_ci.py, step 1):
+    N_old ← (I − k H) N_old (I − k H)ᵀ, N_new ← (I − k H) N_new (I − k H)ᵀ + r k kᵀ (N_new in ``work[:6]``,
+    k and a scratch vector in its last rows). Returns their FLOPs."""
+    k, vec = work[6], work[7]
+    row_gain(c, hvec, col, r, k)
+    joseph_part(N, k, hvec, col, 0.0, vec)
+    joseph_part(work[:6], k, hvec, col, r, vec)
+    return SPLIT_TRACK_ROW_FLOPS
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos):
-    """Predict every UAV of every episode; copy the prior positions to ``prior_pos``."""
+def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos, P_ind=None):
+    """Predict every UAV of every episode; copy the prior positions to ``prior_pos``.
+
+    ``P_ind`` ``(B, N, 6, 6)``, the independent parts of ``"split_ci"``, is predicted too when given
+    (F N Fᵀ + Q: the process noise is every UAV's own).
+    """
     n_b, n = x.shape[0], x.shape[1]
     q = imu_sigma * imu_sigma
     for b in prange(n_b):
         for i in range(n):
             predict_uav(x[b, i], P[b, i], imu[b, i], dt, q)
+            if P_ind is not None:
+                predict_covariance(P_ind[b, i], dt, q)
             for d in range(3):
                 prior_pos[b, i, d] = x[b, i, d]
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
-                alpha_th, alpha_min, active, flops, peer_update=0):
+                alpha_th, alpha_min, active, flops, peer_update=0, P_ind=None):
     """Trust-weighted joint update of every UAV of every episode (in place).
 
     Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
     ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output;
     P holds the priors on entry (``"ci"`` reads the neighbours' before any UAV updates).
+    ``"split_ci"`` needs ``P_ind`` ``(B, N, 6, 6)``, the independent parts of P (prior in,
+    posterior out; ``split_ci.py``).
     """
     n_b, n = x.shape[0], x.shape[1]
+    if peer_update == 2 and P_ind is None:
+        raise ValueError("peer_update 'split_ci' needs P_ind, the (B, N, 6, 6) independent parts of P")
+    # the independent parts ("split_ci"; otherwise unread, a stand-in)
+    if P_ind is None:
+        N_all = np.zeros((1, 1, 6, 6))
+    else:
+        N_all = P_ind
     for b in prange(n_b):
         x0 = np.empty(6)
         hvec = np.empty(3)
         c = np.empty(6)
+        work = np.empty((8, 6))
         prior_pp = np.empty((n, 3, 3))
-        if peer_update == 1:
+        prior_ind_pp = np.empty((n, 3, 3))
+        if peer_update >= 1:
             for i in range(n):
                 prior_pp[i] = P[b, i, :3, :3]
+        if peer_update == 2:
+            for i in range(n):
+                prior_ind_pp[i] = N_all[b, i, :3, :3]
         for i in range(n):
             flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
                                     r0[i], anchors, landmarks, prior_pos[b], prior_pp, peer_update, alpha_th,
                                     alpha_min,
-                                    active[b, i], x0, hvec, c)
+                                    active[b, i], x0, hvec, c, N_all, b, i, prior_ind_pp, work)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
-             alpha_th, alpha_min, est, peer_update=0):
+             alpha_th, alpha_min, est, peer_update=0, P_ind=None):
     """Filter whole sequences: T predict+update steps per episode in one call.
 
     Shapes: imu ``(T, B, N, 3)``, z ``(T, B, N, L, 3)``, valid/alpha ``(T, B, N, L)``,
     est ``(T, B, N, 3)`` output posterior positions. Used for offline evaluation and the
-    speed benchmark (no per-step Python dispatch).
+    speed benchmark (no per-step Python dispatch). ``"split_ci"`` carries the independent
+    parts in ``P_ind`` ``(B, N, 6, 6)`` (updated in place), or, without it, starts from P
+    all independent (an initial prior).
     """
     n_t, n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2], z.shape[3]
     q = imu_sigma * imu_sigma
+    # the independent parts ("split_ci": P all independent without P_ind; otherwise unread, a stand-in)
+    if P_ind is None:
+        N_all = P.copy() if peer_update == 2 else np.zeros((1, 1, 6, 6))
+    else:
+        N_all = P_ind
     for b in prange(n_b):
         x0 = np.empty(6)
         hvec = np.empty(3)
         c = np.empty(6)
+        work = np.empty((8, 6))
         prior = np.empty((n, 3))
         prior_pp = np.empty((n, 3, 3))
+        prior_ind_pp = np.empty((n, 3, 3))
         active = np.empty(n_l, dtype=np.bool_)
         for t in range(n_t):
             for i in range(n):
                 predict_uav(x[b, i], P[b, i], imu[t, b, i], dt, q)
                 for d in range(3):
                     prior[i, d] = x[b, i, d]
-                if peer_update == 1:
+                if peer_update >= 1:
                     prior_pp[i] = P[b, i, :3, :3]
+                if peer_update == 2:
+                    predict_covariance(N_all[b, i], dt, q)
+                    prior_ind_pp[i] = N_all[b, i, :3, :3]
             for i in range(n):
                 update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
                            r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0,
-                           hvec, c)
+                           hvec, c, N_all, b, i, prior_ind_pp, work)
                 for d in range(3):
                     est[t, b, i, d] = x[b, i, d]
 

@@ -492,11 +492,14 @@ class FilterSettings(Frozen):
     alpha_min: Annotated[float, Field(gt=0.0, le=1.0)] = 0.01
     init_pos_sigma: PositiveFloat = 0.5
     init_vel_sigma: PositiveFloat = 0.2
-    peer_update: Literal["point", "ci"] = Field(
+    # "split_ci" first: the refusal of an unknown value then reads "'split_ci', 'point' or 'ci'"
+    peer_update: Literal["split_ci", "point", "ci"] = Field(
         default="point", exclude_if=lambda value: value == "point",
         description="'point': a peer measurement takes the neighbour's broadcast prior position as a known point "
                     "(madrl §2.3; every registered task); 'ci': covariance intersection with the neighbour's "
-                    "broadcast covariance, its error correlation unknown (docs/world.md, 'The peer update'). "
+                    "broadcast covariance, its error correlation unknown, peer by peer; 'split_ci': split "
+                    "covariance intersection of all of a step's peers in one update, each UAV's covariance split "
+                    "into a part no neighbour holds and the rest (docs/world.md, 'The peer update'). "
                     "Left out of the spec's canonical JSON at 'point', so the registered tasks' hashes predate it")
 
 

@@ -33,7 +33,7 @@ from numba import njit, prange
 from numba.core import types
 from numba.experimental import structref
 
-from swarmloc.envs.filter.cekf import features_uav, predict_uav, update_uav
+from swarmloc.envs.filter.cekf import features_uav, predict_covariance, predict_uav, update_uav
 from swarmloc.envs.world.faults import FaultSchedule
 from swarmloc.envs.world.labels import channel_sigmas
 from swarmloc.envs.world.sim_kernel import BLOCK, SERIAL_BELOW, WorldInputs, block_bounds, sense_episodes
@@ -52,7 +52,8 @@ class FilterArrays(NamedTuple):
         peer_cov: a peer channel's NIS includes the neighbour's broadcast covariance
             (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks; v0 keeps S = H P_i Hᵀ + R0).
         peer_update: ``cekf.PEER_UPDATE_CODES`` of ``FilterSettings.peer_update`` (0: the
-            neighbour as a known point; 1: covariance intersection).
+            neighbour as a known point; 1: covariance intersection; 2: split covariance
+            intersection of all peers together, ``split_ci.py``).
         kind, target, r0: ``(N, L)`` channel kind, target index and nominal variance R0 [m²];
             sigma ``(N, L)`` the nominal σ [m] (the error labels divide by it, as the world does).
         label_threshold: ``(N, L)`` error-label threshold on the systematic error in σ_eff.
@@ -65,6 +66,8 @@ class FilterArrays(NamedTuple):
 
     Filter state:
         x: ``(B, N, 6)`` mean [p, v]; P ``(B, N, 6, 6)`` covariance (the prior at the pending step).
+        P_ind: ``(B, N, 6, 6)`` the independent part of P under ``"split_ci"``; ``(0, 0, 6, 6)``
+            (never read) under the other updates.
         prior_pos: ``(B, N, 3)`` the broadcast prior positions (peer channels linearise at them).
         imu_prev: ``(B, N, 3)`` IMU reading of the step before the pending one (for the jerk).
 
@@ -105,6 +108,7 @@ class FilterArrays(NamedTuple):
     world_systematic: np.ndarray
     x: np.ndarray
     P: np.ndarray
+    P_ind: np.ndarray
     prior_pos: np.ndarray
     imu_prev: np.ndarray
     pending_sigmas: np.ndarray
@@ -149,6 +153,9 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
     n, n_l = f.kind.shape[0], f.kind.shape[1]
     x0, hvec, c, yv, S = np.empty(6), np.empty(3), np.empty(6), np.empty(3), np.empty((3, 3))
     prior_pp = np.empty((n, 3, 3))
+    split = f.peer_update == 2
+    # "split_ci": the broadcast priors' independent position parts and the update's scratch
+    prior_ind_pp, work = np.empty((n, 3, 3)), np.empty((8, 6))
     # ---- score: posterior at the pending step; a finished episode is updated too (its
     # state is never scored again) but its outputs stay
     for b in range(lo, hi):
@@ -156,16 +163,18 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
         if not score:
             continue
         live = not f.done[b]
-        if f.peer_update == 1:  # the broadcast covariances, before any UAV updates ("ci" reads them)
+        if f.peer_update >= 1:  # the broadcast covariances, before any UAV updates ("ci", "split_ci" read them)
             for i in range(n):
                 for d in range(3):
                     for e in range(3):
                         prior_pp[i, d, e] = f.P[b, i, d, e]
+                        if split:
+                            prior_ind_pp[i, d, e] = f.P_ind[b, i, d, e]
         for i in range(n):
             flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
                                f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], prior_pp,
                                f.peer_update, f.alpha_th,
-                               f.alpha_min, f.active[b, i], x0, hvec, c)
+                               f.alpha_min, f.active[b, i], x0, hvec, c, f.P_ind, b, i, prior_ind_pp, work)
             if live:
                 f.flops[b, i] = flops
                 for d in range(3):
@@ -196,6 +205,8 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
             continue
         for i in range(n):
             predict_uav(f.x[b, i], f.P[b, i], f.world_imu[b, i], f.dt, q)
+            if split:
+                predict_covariance(f.P_ind[b, i], f.dt, q)
             for d in range(3):
                 f.prior_pos[b, i, d] = f.x[b, i, d]
         pos_b, prior_b, P_b = f.world_pos[b], f.prior_pos[b], f.P[b]

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from swarmloc.envs.filter.ekf_rows import SPLIT_CI_STEPS
+
 #: prediction of one UAV: x⁻ = F x + G u (18), block F P Fᵀ (63), Q (36), constants (2)
 PREDICT_FLOPS = 119
 #: one range row: model h, ‖·‖ and H (12), y (10), c = P Hᵀ (30), s (6), gain (2),
@@ -28,6 +30,34 @@ CI_RANGE_FLOPS = 24 + 49 * 8 + 36
 #: a relative-position link updates as one 3-row block: the ω search (49 × (3×3 S and its
 #: inverse 45, tr(A S⁻¹ A) 54)), then the gain (90), x (18), P (126) and P/ω (36)
 CI_REL_FLOPS = 49 * 99 + 90 + 18 + 126 + 36
+#: split covariance intersection (``FilterSettings.peer_update = "split_ci"``, ``envs/filter/split_ci.py``):
+#: the independent part's prediction F N Fᵀ + Q, per UAV-step
+SPLIT_PREDICT_FLOPS = 63 + 36
+#: per absolute row: the gain k = c / s (8), then both independent parts through it: M Hᵀ and
+#: H M Hᵀ (23) and the symmetric update of 21 entries (7 each), twice
+SPLIT_TRACK_ROW_FLOPS = 8 + 2 * (23 + 21 * 7)
+#: a symmetric positive definite 6×6 inverse by Cholesky: the factor (91 with 6 roots), L⁻¹ (76), L⁻ᵀ L⁻¹ (182)
+SPD6_INVERSE_FLOPS = 91 + 76 + 182
+#: one evaluation of the weight search's tr P⁺ (``split_ci._fused_trace``) without its peers: P1 = D'/ω + N'
+#: (108), two 6×6 inverses, the trace (5); its gradient: P⁺² (396), P1⁻¹ again, D' P1⁻¹ (432), the
+#: trace of P⁺² P1⁻¹ D' P1⁻¹ (468), 3
+SPLIT_CI_EVAL_FLOPS = 108 + 2 * SPD6_INVERSE_FLOPS + 5
+SPLIT_CI_GRAD_FLOPS = 396 + SPD6_INVERSE_FLOPS + 432 + 468 + 3
+#: once per UAV-step with peers: N' = N_old + N_new (36), the grid of ω_0 (49 evaluations), the
+#: multiplicative steps (SPLIT_CI_STEPS evaluations with their gradients and steps, 4 per source, then
+#: one more evaluation), the comparison with no update (6), P1 = D'/ω + N' (108)
+SPLIT_CI_FLOPS = (36 + (49 + SPLIT_CI_STEPS + 1) * SPLIT_CI_EVAL_FLOPS
+                  + SPLIT_CI_STEPS * (SPLIT_CI_GRAD_FLOPS + 4) + 6 + 108)
+#: per peer range: the model and u (12), uᵀD_j u, uᵀN_j u and P u (60), its share (6), each evaluation
+#: (R_j 3, the rank-one term 18), each gradient (R_j 3, uᵀQu 18, 5) and step (4), its row (the range
+#: row's 135 + R_j 3) and N_new through it (8 + 23 + 21 × 7)
+SPLIT_CI_RANGE_FLOPS = (12 + 60 + 6 + (49 + SPLIT_CI_STEPS + 1) * 21 + SPLIT_CI_STEPS * (26 + 4) + 135 + 3
+                        + 8 + 23 + 21 * 7)
+#: per relative position: its share (S 12, inverse 45, tr(A S⁻¹ A) 54), each evaluation (R_j 36,
+#: inverse 45, sum 9), each gradient (R_j and its inverse 81, R_j⁻¹ D_j R_j⁻¹ 99, a trace 18, 2) and
+#: step (4), the 3-row block (S 36, inverse 45, gain 90, x 18, P 126) and N_new through it (21 × 45)
+SPLIT_CI_REL_FLOPS = (12 + 45 + 54 + (49 + SPLIT_CI_STEPS + 1) * 90 + SPLIT_CI_STEPS * (200 + 4)
+                      + 36 + 45 + 90 + 18 + 126 + 21 * 45)
 
 
 def filter_flops(n_range_rows: np.ndarray, n_vector_rows: np.ndarray, n_tdoa_rows: np.ndarray | int = 0) -> np.ndarray:
