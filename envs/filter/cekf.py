@@ -21,7 +21,7 @@ by blockdiag(P_i/ω, P_j/(1 − ω)); for a peer range (H = hᵀ on p_i, −hᵀ
 i.e. the point update with R = ω r + ω hᵀP_j h/(1 − ω) followed by P ← P/ω. A relative
 position (z = p_j − p_i) is one 3-row block of the same form with S = A/ω + B/(1 − ω) + r I
 (A, B the two position covariances). ω minimises the trace of P_i⁺'s position block on a grid
-of ``ekf_rows.CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
+of ``constants.CI_GRID`` points, or is 1 (no update) when no grid point lowers it. P_j is the
 neighbour's prior at this step (the broadcast one), read before any UAV updates.
 
 ``peer_update = "split_ci"``: split covariance intersection of all of a UAV's peers of a step
@@ -46,7 +46,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from swarmloc.envs.filter.ekf_rows import MIN_RANGE as _MIN_RANGE, joseph_part
+from swarmloc.envs.filter.constants import MIN_RANGE as _MIN_RANGE
+from swarmloc.envs.filter.ekf_rows import joseph_part
 from swarmloc.envs.filter.ekf_rows import scalar_update as _scalar_update
 from swarmloc.envs.filter.peer_ci import ci_peers
 from swarmloc.envs.filter.split_ci import row_gain, split_ci_peers

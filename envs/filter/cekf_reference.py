@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmloc.envs.filter.ekf_rows import CI_GRID, OMEGA_FLOOR, SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import CI_GRID, OMEGA_FLOOR, SPLIT_CI_STEPS
 from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
 

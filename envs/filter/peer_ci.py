@@ -12,8 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.envs.filter.ekf_rows import CI_GRID
-from swarmloc.envs.filter.ekf_rows import MIN_RANGE as _MIN_RANGE
+from swarmloc.envs.filter.constants import CI_GRID
+from swarmloc.envs.filter.constants import MIN_RANGE as _MIN_RANGE
 from swarmloc.envs.filter.ekf_rows import inv3 as _inv3
 from swarmloc.envs.filter.ekf_rows import scalar_update as _scalar_update
 from swarmloc.envs.filter.ekf_rows import scale_cov as _scale_cov

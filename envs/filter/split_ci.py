@@ -81,8 +81,8 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.envs.filter.ekf_rows import (CI_GRID, MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_STEPS, inv3, inv_spd6,
-                                           joseph_part, scalar_update)
+from swarmloc.envs.filter.constants import CI_GRID, MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_STEPS
+from swarmloc.envs.filter.ekf_rows import inv3, inv_spd6, joseph_part, scalar_update
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
 from swarmloc.envs.world.cost import SPLIT_CI_FLOPS, SPLIT_CI_RANGE_FLOPS, SPLIT_CI_REL_FLOPS
 

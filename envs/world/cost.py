@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmloc.envs.filter.ekf_rows import SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import SPLIT_CI_STEPS
 
 #: prediction of one UAV: x⁻ = F x + G u (18), block F P Fᵀ (63), Q (36), constants (2)
 PREDICT_FLOPS = 119
