@@ -93,7 +93,7 @@ from swarmloc.envs.tasks.specs import TaskSpec
 #: heavy-tail excess of hybrid GPS noise too; no v0 task's GPS error comes near either.)
 BOUND_LABEL_SIGMAS = LABEL_SIGMAS
 #: bump whenever the bound's maths or inputs change (it keys the persistent cache)
-BOUND_VERSION = 1
+BOUND_VERSION = 2
 
 
 class BoundInputs(NamedTuple):
@@ -105,6 +105,10 @@ class BoundInputs(NamedTuple):
     Attributes:
         dt: step length [s].
         imu_sigma: accelerometer noise σ [m/s²] (Q = σ² G Gᵀ).
+        bias_sigma: σ_b of the per-episode accelerometer bias, a random constant b ~ N(0, σ_b² I)
+            per UAV (``Sensors.imu_bias_sigma``) [m/s²]; 0: no bias state.
+        fault_var: ``(T, B, N)`` per-axis prior variance σ_f² of the IMU-fault bias active on a UAV at
+            a step (0: no fault there) [m²/s⁴]; a new value starts a new fault (its bias is drawn afresh).
         p0_diag: ``(6,)`` diagonal of one UAV's initial covariance [m², m²/s²] (p then v).
         kind, target: ``(N, L)`` int64 channel kind and the anchor / UAV / landmark it refers to.
         r0: ``(N, L)`` nominal variance per scalar row [m²].
@@ -115,6 +119,8 @@ class BoundInputs(NamedTuple):
 
     dt: float
     imu_sigma: float
+    bias_sigma: float
+    fault_var: np.ndarray
     p0_diag: np.ndarray
     kind: np.ndarray
     target: np.ndarray
@@ -185,6 +191,36 @@ def bound_labels(valid: np.ndarray, injected: np.ndarray, sigma: np.ndarray,
     return np.asarray(valid, dtype=bool) & (np.asarray(injected) > label_sigmas * np.asarray(sigma))
 
 
+def fault_variance(schedule, dt: float, n_steps: int, n_uav: int) -> np.ndarray:
+    """Per step and UAV, the prior variance per axis of the IMU-fault bias the bound carries.
+
+    The world adds a window's bias β to a faulty UAV's accelerometer for ``start <= t < end``
+    (``faults.FaultSchedule.imu_time``, ``imu_bias``, ``imu_nodes``; t = k·dt at step k). The
+    bound knows the window (clairvoyantly, as it knows which channels are biased) but not β:
+    inside it the UAV's acceleration carries an unknown constant f ~ N(0, σ_f² I) with
+    σ_f² = ‖β‖²/3, the isotropic prior of β's energy. Overlapping windows of one UAV add their
+    variances (their sum is one new unknown from the second onset).
+
+    Args:
+        schedule: a ``FaultSchedule`` of B episodes (None: no IMU fault).
+        dt: step [s]; n_steps: T; n_uav: N.
+
+    Returns:
+        ``(T, B, N)`` σ_f² [m²/s⁴], 0 where no fault is active.
+    """
+    if schedule is None:
+        raise ValueError("the bound needs the episodes' fault schedule (world.schedule)")
+    n_b = schedule.imu_time.shape[0]
+    out = np.zeros((n_steps, n_b, n_uav))
+    t = dt * np.arange(1, n_steps + 1)
+    for wi in range(schedule.imu_time.shape[1]):
+        start, end = schedule.imu_time[:, wi, 0], schedule.imu_time[:, wi, 1]
+        inside = (t[:, None] >= start[None]) & (t[:, None] < end[None])  # (T, B)
+        var = np.sum(np.asarray(schedule.imu_bias[:, wi], dtype=float) ** 2, axis=-1) / 3.0  # (B,)
+        out += (inside[:, :, None] & schedule.imu_nodes[None, :, wi, :]) * var[None, :, None]
+    return out
+
+
 class BoundRecorder:
     """Collects the bound's inputs step by step from a world's buffers.
 
@@ -220,13 +256,20 @@ class BoundRecorder:
         self.use[k] = valid & ~bound_labels(valid, injected, self.layout.sigma, self.label_sigmas)
         self.steps = k + 1
 
-    def inputs(self) -> BoundInputs:
-        """The recorded episodes as ``BoundInputs`` (every step must have been recorded)."""
+    def inputs(self, schedule) -> BoundInputs:
+        """The recorded episodes as ``BoundInputs`` (every step must have been recorded).
+
+        Args:
+            schedule: the episodes' ``FaultSchedule`` (``world.schedule``): its IMU-fault windows
+                (``fault_variance``).
+        """
         if self.steps != self.pos.shape[0]:
             raise ValueError(f"{self.steps} of {self.pos.shape[0]} steps of {self.spec.task_id} recorded")
         f, lay = self.spec.filter, self.layout
         return BoundInputs(
             dt=float(self.spec.dt), imu_sigma=float(self.spec.sensors.imu_sigma),
+            bias_sigma=float(self.spec.sensors.imu_bias_sigma),
+            fault_var=fault_variance(schedule, self.spec.dt, self.pos.shape[0], self.pos.shape[2]),
             p0_diag=np.array([f.init_pos_sigma**2] * 3 + [f.init_vel_sigma**2] * 3),
             kind=np.ascontiguousarray(lay.kind), target=np.ascontiguousarray(lay.target),
             r0=np.ascontiguousarray(lay.r0), anchors=self.anchors, landmarks=self.landmarks, pos=self.pos,
@@ -255,11 +298,11 @@ def record_inputs(spec: TaskSpec, seeds: np.ndarray | list[int],
     for _ in range(spec.n_steps):
         buf = world.sense()
         rec.record(buf.pos, buf.valid, buf.injected)
-    return rec.inputs(), world
+    return rec.inputs(world.schedule), world
 
 
 def distinct_episodes(inputs: BoundInputs) -> tuple[np.ndarray, np.ndarray]:
-    """Episodes whose inputs differ: the bound depends on the truth and the channels used only.
+    """Episodes whose inputs differ: the bound depends on the truth, the channels used and the IMU faults only.
 
     Tasks with a fixed trajectory and scheduled faults give every seed the same bound; it is
     computed once.
@@ -273,7 +316,8 @@ def distinct_episodes(inputs: BoundInputs) -> tuple[np.ndarray, np.ndarray]:
     which = np.empty(inputs.pos.shape[1], dtype=np.int64)
     for b in range(inputs.pos.shape[1]):
         key = hashlib.sha256(np.ascontiguousarray(inputs.pos[:, b]).tobytes()
-                             + np.packbits(inputs.use[:, b]).tobytes()).digest()
+                             + np.packbits(inputs.use[:, b]).tobytes()
+                             + np.ascontiguousarray(inputs.fault_var[:, b]).tobytes()).digest()
         if key not in seen:
             seen[key] = len(first)
             first.append(b)
@@ -296,7 +340,8 @@ def pcrlb(inputs: BoundInputs) -> Pcrlb:
     w = inputs._replace(pos=np.ascontiguousarray(inputs.pos, dtype=np.float64),
                         use=np.ascontiguousarray(inputs.use, dtype=np.bool_),
                         p0_diag=np.ascontiguousarray(inputs.p0_diag, dtype=np.float64),
-                        dt=float(inputs.dt), imu_sigma=float(inputs.imu_sigma))
+                        fault_var=np.ascontiguousarray(inputs.fault_var, dtype=np.float64),
+                        dt=float(inputs.dt), imu_sigma=float(inputs.imu_sigma), bias_sigma=float(inputs.bias_sigma))
     first, which = distinct_episodes(w)
     pcrlb_kernel(w, first, pos_var, failed_at)
     # twins share the bound of the first episode with their inputs

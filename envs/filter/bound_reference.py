@@ -1,20 +1,24 @@
 """Readable float64 reference of the information bound (posterior Cramér–Rao bound).
 
 The same maths as ``bound.py`` written as a direct transcription of the recursion of
-Tichavský, Muravchik and Nehorai (1998) for a linear-Gaussian dynamic model with
-nonlinear measurements, over the joint state of the swarm, UAV-major:
-x = [p_1, v_1, …, p_N, v_N] (6N):
+Tichavský, Muravchik and Nehorai (1998) for a linear-Gaussian dynamic model with nonlinear
+measurements, over the joint state of the swarm, UAV-major: x = [x_1, …, x_N] with
+x_i = [p_i, v_i, (b_i), (f_i)] (6, 9 or 12 states: the accelerometer bias b where the task
+draws one, the IMU-fault bias f where an episode has an IMU fault):
 
     J₀ = P₀⁻¹
-    J_k = (Q + F J_{k−1}⁻¹ Fᵀ)⁻¹ + Σ_c H_cᵀ R_c⁻¹ H_c
+    C_k⁻ = Q_k + F_k J_{k−1}⁻¹ F_kᵀ
+    J_k = (C_k⁻)⁻¹ + Σ_c E_{x ~ N(x_k, C_k⁻)}[H_c(x)ᵀ R_c⁻¹ H_c(x)]
 
-F and Q are the CEKF's IMU-driven constant-acceleration model (``cekf_reference.transition``)
-per UAV, block diagonal over the swarm; H_c is the Jacobian of channel c at the TRUE
-positions over the joint state (a peer channel has a block for the receiver and one for
-the neighbour); R_c the channel's nominal noise. Only the channels in ``use`` (present and
-not labelled faulty) enter. The bound of UAV i at step k is tr[J_k⁻¹] over its position
-block. Slow (dense 6N × 6N inverses, Python loops) and meant as the oracle the fast path is
-tested against.
+F_k, Q_k per UAV (``uav_model``): the CEKF's IMU-driven constant-acceleration model
+(``cekf_reference.transition``) with the biases integrated like the acceleration they corrupt,
+f redrawn at a fault's onset. H_c is the Jacobian of channel c over the joint state (a peer
+channel has a block for the receiver and one for the neighbour); the expectation is over the
+positions, centred at the TRUE ones with the predicted covariance, by the third-degree
+cubature rule (``expected_information``); R_c the channel's nominal noise. Only the channels
+in ``use`` (present and not labelled faulty) enter. The bound of UAV i at step k is
+tr[J_k⁻¹] over its position block. Slow (dense inverses, Python loops) and meant as the
+oracle the fast path is tested against.
 """
 
 from __future__ import annotations
@@ -26,23 +30,58 @@ from swarmloc.envs.filter.bound import BoundInputs, Pcrlb
 from swarmloc.envs.filter.cekf_reference import measurement_rows, transition
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
 
+#: the third-degree spherical-radial cubature rule of a 3-vector (Arasaratnam & Haykin 2009):
+#: points x̄ ± √3 L e_c (L Lᵀ = Σ), weight 1/6 each
+CUBATURE_UNIT = np.sqrt(3.0) * np.vstack([np.eye(3), -np.eye(3)])
 
-def joint_model(n_uav: int, dt: float, imu_sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """F and Q of the swarm ``(6N, 6N)``: the per-UAV CEKF model, block diagonal."""
-    F1, G1 = transition(dt)
-    # Q = σ_imu² G Gᵀ (cekf_reference.predict_reference)
-    Q1 = imu_sigma**2 * G1 @ G1.T
-    F = scipy.linalg.block_diag(*[F1] * n_uav)
-    Q = scipy.linalg.block_diag(*[Q1] * n_uav)
+
+def uav_model(dt: float, imu_sigma: float, has_bias: bool, has_fault: bool, fault_active: bool,
+              fault_onset_var: float) -> tuple[np.ndarray, np.ndarray]:
+    """One UAV's F and Q ``(s, s)`` at one step, s = 6 + 3·has_bias + 3·has_fault.
+
+    The accelerometer reads u = a + b + f·[fault active] + n, n ~ N(0, σ_imu² I), so the motion
+    integrates a = u − b − f − n: with G = [dt²/2·I; dt·I] (``cekf_reference.transition``),
+    [p; v]⁺ = F₆ [p; v] − G (b + f + n), b⁺ = b, f⁺ = f. At a fault's onset f is first drawn
+    afresh, f ~ N(0, σ_f² I) (the reset R: f's row of R zero, its noise σ_f² I), then the step
+    moves with it: F = F_m R, Q = F_m Q_R F_mᵀ + Q_imu.
+    """
+    F6, G = transition(dt)
+    s = 6 + 3 * has_bias + 3 * has_fault
+    F = np.eye(s)
+    Q = np.zeros((s, s))
+    F[:6, :6] = F6
+    Q[:6, :6] = imu_sigma**2 * G @ G.T  # Q = σ_imu² G Gᵀ (cekf_reference.predict_reference)
+    col = 6
+    if has_bias:
+        F[:6, col:col + 3] = -G
+        col += 3
+    if has_fault:
+        if fault_active:
+            F[:6, col:col + 3] = -G
+        if fault_onset_var > 0:
+            R, Q_R = np.eye(s), np.zeros((s, s))
+            R[col:col + 3, col:col + 3] = 0.0
+            Q_R[col:col + 3, col:col + 3] = fault_onset_var * np.eye(3)
+            F, Q = F @ R, F @ Q_R @ F.T + Q
     return F, Q
 
 
+def joint_model(n_uav: int, dt: float, imu_sigma: float, has_bias: bool = False, has_fault: bool = False,
+                fault_active: np.ndarray | None = None,
+                fault_onset_var: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """F and Q of the swarm ``(sN, sN)``: ``uav_model`` per UAV, block diagonal."""
+    active = np.zeros(n_uav, bool) if fault_active is None else fault_active
+    onset = np.zeros(n_uav) if fault_onset_var is None else fault_onset_var
+    blocks = [uav_model(dt, imu_sigma, has_bias, has_fault, bool(active[i]), float(onset[i])) for i in range(n_uav)]
+    return scipy.linalg.block_diag(*[F for F, _ in blocks]), scipy.linalg.block_diag(*[Q for _, Q in blocks])
+
+
 def channel_jacobian(i: int, kind: int, target: int, pos: np.ndarray, anchors: np.ndarray,
-                     landmarks: np.ndarray) -> np.ndarray | None:
-    """Jacobian ``(rows, 6N)`` of UAV i's channel at the true positions ``pos`` ``(N, 3)``.
+                     landmarks: np.ndarray, s: int = 6) -> np.ndarray | None:
+    """Jacobian ``(rows, sN)`` of UAV i's channel at the positions ``pos`` ``(N, 3)`` (s states per UAV).
 
     The receiver's block is the CEKF's own measurement Jacobian (``cekf_reference.measurement_rows``
-    with the neighbour at its true position). A peer range ‖p_i − p_j‖ and a relative position
+    with the neighbour at ``pos``). A peer range ‖p_i − p_j‖ and a relative position
     p_j − p_i depend on the neighbour as −(receiver block): the neighbour's block is its negative.
     Returns None for a degenerate range (zero distance), which the CEKF skips too.
     """
@@ -52,33 +91,58 @@ def channel_jacobian(i: int, kind: int, target: int, pos: np.ndarray, anchors: n
     if rows is None:
         return None
     _, H_i = rows
-    H = np.zeros((H_i.shape[0], 6 * n))
-    H[:, 6 * i:6 * i + 6] = H_i
+    H = np.zeros((H_i.shape[0], s * n))
+    H[:, s * i:s * i + 6] = H_i
     if kind in (PEER, PEER_REL):
-        H[:, 6 * target:6 * target + 3] = -H_i[:, :3]
+        H[:, s * target:s * target + 3] = -H_i[:, :3]
     return H
 
 
+def expected_information(i: int, kind: int, target: int, pos: np.ndarray, C_pos: np.ndarray, anchors: np.ndarray,
+                         landmarks: np.ndarray, s: int = 6) -> np.ndarray:
+    """E[Hᵀ H] ``(sN, sN)`` of UAV i's channel over the positions p ~ N(pos, C_pos), by cubature.
+
+    H depends on the positions through one 3-vector: p_i − p_j for a peer channel (the
+    neighbour's position moves it the other way), p_i otherwise. Its covariance is
+    Σ = T C_pos Tᵀ with T the selection (I at i, −I at j for a peer); the six cubature points
+    move p_i by ±√3 L e_c (L = cholesky(Σ)), which moves that 3-vector by the same amount.
+    """
+    n = pos.shape[0]
+    T = np.zeros((3, 3 * n))
+    T[:, 3 * i:3 * i + 3] = np.eye(3)
+    if kind in (PEER, PEER_REL):
+        T[:, 3 * target:3 * target + 3] -= np.eye(3)
+    L = np.linalg.cholesky(T @ C_pos @ T.T)
+    info = np.zeros((s * n, s * n))
+    for xi in CUBATURE_UNIT @ L.T:
+        moved = pos.copy()
+        moved[i] = pos[i] + xi
+        H = channel_jacobian(i, kind, target, moved, anchors, landmarks, s)
+        if H is not None:
+            info += H.T @ H / len(CUBATURE_UNIT)
+    return info
+
+
 def measurement_information(pos: np.ndarray, use: np.ndarray, kind: np.ndarray, target: np.ndarray,
-                            r0: np.ndarray, anchors: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
-    """Σ_c H_cᵀ R_c⁻¹ H_c ``(6N, 6N)`` of one step.
+                            r0: np.ndarray, anchors: np.ndarray, landmarks: np.ndarray, C_pos: np.ndarray,
+                            s: int = 6) -> np.ndarray:
+    """Σ_c E[H_cᵀ R_c⁻¹ H_c] ``(sN, sN)`` of one step.
 
     Args:
         pos: ``(N, 3)`` true positions; use: ``(N, L)`` channels that enter.
         kind, target, r0: ``(N, L)`` channel layout and nominal variances.
         anchors: ``(A, 3)``; landmarks: ``(M, 3)``.
+        C_pos: ``(3N, 3N)`` the predicted covariance of the positions (UAV-major).
+        s: states per UAV.
     """
     n, n_l = kind.shape
-    info = np.zeros((6 * n, 6 * n))
+    info = np.zeros((s * n, s * n))
     for i in range(n):
         for l in range(n_l):
-            if not use[i, l]:
-                continue
-            H = channel_jacobian(i, int(kind[i, l]), int(target[i, l]), pos, anchors, landmarks)
-            if H is None:
-                continue
-            # Hᵀ R⁻¹ H with R = r0·I (independent rows of equal nominal variance)
-            info += H.T @ H / r0[i, l]
+            if use[i, l]:
+                # Hᵀ R⁻¹ H with R = r0·I (independent rows of equal nominal variance)
+                info += expected_information(i, int(kind[i, l]), int(target[i, l]), pos, C_pos, anchors,
+                                             landmarks, s) / r0[i, l]
     return info
 
 
@@ -92,16 +156,26 @@ def pcrlb_reference(inputs: BoundInputs) -> Pcrlb:
     """
     w = inputs
     n_t, n_b, n = w.pos.shape[:3]
-    F, Q = joint_model(n, w.dt, w.imu_sigma)
-    J0 = np.diag(np.tile(1.0 / np.asarray(w.p0_diag), n))  # J₀ = P₀⁻¹ (P₀ diagonal)
+    has_bias, has_fault = w.bias_sigma > 0, bool((np.asarray(w.fault_var) > 0).any())
+    s = 6 + 3 * has_bias + 3 * has_fault
+    # P₀ per UAV: the filter's diagonal, the bias prior σ_b² I; f is redrawn at each onset (any variance before)
+    p0 = np.concatenate([w.p0_diag, [w.bias_sigma**2] * 3 * has_bias, [1.0] * 3 * has_fault])
+    J0 = np.diag(np.tile(1.0 / p0, n))  # J₀ = P₀⁻¹
+    pos_idx = np.concatenate([np.arange(s * i, s * i + 3) for i in range(n)])
     pos_var = np.full((n_t, n_b, n), np.nan)
     failed_at = np.full(n_b, -1, dtype=np.int64)
     for b in range(n_b):
         J = J0.copy()
+        fv = np.asarray(w.fault_var[:, b], dtype=float)
         for k in range(n_t):
-            # J_k = (Q + F J_{k−1}⁻¹ Fᵀ)⁻¹ + Σ_c H_cᵀ R_c⁻¹ H_c  (literal inverses: this is the reference)
-            J = np.linalg.inv(Q + F @ np.linalg.inv(J) @ F.T) + measurement_information(
-                w.pos[k, b], w.use[k, b], w.kind, w.target, w.r0, w.anchors, w.landmarks)
+            onset = np.where((fv[k] > 0) & ((fv[k - 1] != fv[k]) if k > 0 else True), fv[k], 0.0)
+            F, Q = joint_model(n, w.dt, w.imu_sigma, has_bias, has_fault, fv[k] > 0, onset)
+            # C⁻ = Q + F J_{k−1}⁻¹ Fᵀ;  J_k = (C⁻)⁻¹ + Σ_c E[H_cᵀ R_c⁻¹ H_c]  (literal inverses: this is the reference)
+            C_prior = Q + F @ np.linalg.inv(J) @ F.T
+            C_prior = 0.5 * (C_prior + C_prior.T)
+            J = np.linalg.inv(C_prior) + measurement_information(
+                w.pos[k, b], w.use[k, b], w.kind, w.target, w.r0, w.anchors, w.landmarks,
+                C_prior[np.ix_(pos_idx, pos_idx)], s)
             J = 0.5 * (J + J.T)
             try:
                 np.linalg.cholesky(J)
@@ -110,5 +184,5 @@ def pcrlb_reference(inputs: BoundInputs) -> Pcrlb:
                 break
             C = np.linalg.inv(J)
             for i in range(n):
-                pos_var[k, b, i] = np.trace(C[6 * i:6 * i + 3, 6 * i:6 * i + 3])
+                pos_var[k, b, i] = np.trace(C[s * i:s * i + 3, s * i:s * i + 3])
     return Pcrlb(pos_var=pos_var, failed_at=failed_at)
