@@ -188,7 +188,7 @@ def test_error_labels_batched_equal_single():
 def test_v0_numbers_reproduce_shipped_episodes_exactly():
     """The v0 numbers are untouched: ``chi2-gate`` gives the shipped standard-v0 episodes bit for bit,
     the metrics that read the injected-fault labels (``anomaly_detection_rate``, ``fault_rmse``) included
-    (the ``bound_rmse`` to 1e-12; the retired ``normalized_score`` is no longer computed)."""
+    (but ``bound_rmse``, an instrument now at bound v2; the retired ``normalized_score`` is no longer computed)."""
     from swarmloc.bench.evaluation.runner import run_episodes
     from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
@@ -201,10 +201,10 @@ def test_v0_numbers_reproduce_shipped_episodes_exactly():
         want.pop("normalized_score")  # the retired v0 score, in the shipped (schema 2) file only
         assert "normalized_score" not in got["metrics"]
         assert got["metrics"]["anomaly_detection_rate"] is not None, got["task"]
-        # the information bound is not a v0 number: its dense products go through BLAS (numba's `@`),
-        # whose kernels are chosen per CPU, so its last bits differ between CPU models (measured on
-        # GradualFault-v0 with 27×27 blocks: 0.8110501013453439 on AMD EPYC against the shipped …476)
-        assert got["metrics"]["bound_rmse"] == pytest.approx(want.pop("bound_rmse"), rel=1e-12), got["task"]
+        # the information bound is an instrument, not a v0 number: the shipped files carry bound v1
+        # (envs/filter/bound.py, BOUND_VERSION 1); v2 (expected information, bias states) differs
+        want.pop("bound_rmse")
+        assert got["metrics"]["bound_rmse"] > 0, got["task"]
         assert {k: got["metrics"][k] for k in want} == want, got["task"]
 
 
