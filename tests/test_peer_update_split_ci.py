@@ -288,7 +288,7 @@ def _mean_nees(task_id, seeds, update, **overrides):
 
 @pytest.mark.parametrize("sensors, point_above", [({}, 3.5), ({"anchor_max_range": 11.0}, 10.0)])
 def test_uniform_trust_is_consistent_on_fault_free_scale8(sensors, point_above):
-    """Scale8-v1 with its faults removed, 4 dev seeds: mean position NEES near 3 (measured 3.03; 2.31 with the
+    """Scale8-v1 with its faults removed, 4 dev seeds: mean position NEES near 3 (measured 3.03; 2.27 with the
     anchors ranged within 11 m, where the peers carry information), against 3.88 and 13.85 for ``point``."""
     seeds = list(range(DEV_SEED_START, DEV_SEED_START + 4))
     nees = _mean_nees("swarmloc/Scale8-v1", seeds, "split_ci", faults=FAULT_FREE, sensors=sensors)

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmloc.envs.filter.constants import CI_GRID, OMEGA_FLOOR, SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import OMEGA_FLOOR, SPLIT_CI_GRID, SPLIT_CI_STEPS
 from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
 
@@ -133,7 +133,7 @@ class PeerRows(NamedTuple):
 
 
 def split_ci_peer_update(x: np.ndarray, P: np.ndarray, N_old: np.ndarray, N_new: np.ndarray,
-                         peers: Sequence[PeerRows], grid: int = CI_GRID, steps: int = SPLIT_CI_STEPS):
+                         peers: Sequence[PeerRows], grid: int = SPLIT_CI_GRID, steps: int = SPLIT_CI_STEPS):
     """Split covariance intersection of all of a UAV's peer channels of a step (``split_ci`` docstring, steps 2–3).
 
     The dependent errors of the UAV (D = P − N_old − N_new) and of its neighbours (D_j) are bounded

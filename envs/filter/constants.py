@@ -5,9 +5,12 @@ with them, and ``swarmloc --help`` must not import numba)."""
 MIN_RANGE = 1e-9
 #: the covariance intersections' weight ω is searched on {1/CI_GRID, …, (CI_GRID − 1)/CI_GRID} and 1
 CI_GRID = 50
-#: ``"split_ci"``: multiplicative steps of the weight search after the grid (Scale32 with the anchors
-#: ranged within 11 m, 31 peers, step 200: tr P⁺ within 0.1 % of its value after 1,000 steps; without
-#: the steps, uniform's RMSE is 5–9 % higher on the Scale variants, 4 dev seeds)
-SPLIT_CI_STEPS = 20
+#: ``"split_ci"``: the weight search's ω_0 grid {1/SPLIT_CI_GRID, …} and the multiplicative steps after it.
+#: Measured (uniform, faults off, dev seeds 2000000–3, position NEES / RMSE in m; Scale6-v0 world steps at
+#: B=1024 on the 2-core dev machine), grid/steps 50/20: Scale8-v1 with anchors ranged within 11 m 2.31 /
+#: 0.238, Scale32-v1 likewise 2.10 / 0.212, Scale8-v1 3.03 / 0.139, 19.6k env-steps/s; 10/5: 2.27 / 0.243,
+#: 2.01 / 0.211, 3.03 / 0.139, 58k env-steps/s; 5/5: 0.246, 0.217, 68k; 2/10: 0.243, 0.214, 59k
+SPLIT_CI_GRID = 10
+SPLIT_CI_STEPS = 5
 #: ``"split_ci"``: the smallest weight a step leaves; a source at it adds nothing (D/ω dwarfs the rest)
 OMEGA_FLOOR = 1e-6

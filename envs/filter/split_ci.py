@@ -49,15 +49,15 @@ consistent update, so the search only needs to be good:
 - a start: the neighbours share 1 − ω_0 in proportion to what each would give alone at full
   weight, Δ_j = tr(P'_pp H_jᵀ (H_j P' H_jᵀ + J_j P_j J_jᵀ + r_j I)⁻¹ H_j P'_pp) (fast covariance
   intersection weighs its sources by their information in the same way, Niehsen 2002), and ω_0
-  is the best of {1/CI_GRID, …, (CI_GRID − 1)/CI_GRID};
+  is the best of {1/SPLIT_CI_GRID, …, (SPLIT_CI_GRID − 1)/SPLIT_CI_GRID};
 - then ``SPLIT_CI_STEPS`` multiplicative steps ω_k ← ω_k √g_k / Σ_l ω_l √g_l with
   g_k = −∂ tr P⁺/∂ω_k, the algorithm of optimal experimental design for the trace criterion
   (Silvey, Titterington and Torsney 1978; Yu 2010): with many peers the best weights sit on a
   few of them, which a share by Δ alone misses (without the steps, uniform's RMSE is 5–9 % higher
   on Scale8 and Scale32 with the anchors ranged within 11 m, 4 dev seeds);
 - no peer update (ω_0 = 1) when the weights reached do not lower tr P'.
-tr P⁺ is computed in information form, (P⁺)⁻¹ = P1⁻¹ + E (Σ_j H_jᵀ R_j⁻¹ H_j) Eᵀ (E the position
-rows), with 6×6 Cholesky inverses, and g by differentiating it. The update itself applies the
+tr P⁺ is the information form (P⁺)⁻¹ = P1⁻¹ + E (Σ_j H_jᵀ R_j⁻¹ H_j) Eᵀ (E the position rows) turned
+by the push-through identity into 3×3 algebra (``_fused_trace``), and g its derivative. The update itself applies the
 neighbours' blocks one after the other (exact, R being block diagonal): a range as one scalar row
 (``ekf_rows.scalar_update``), a relative position as one 3-row block.
 
@@ -81,8 +81,8 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.envs.filter.constants import CI_GRID, MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_STEPS
-from swarmloc.envs.filter.ekf_rows import inv3, inv_spd6, joseph_part, scalar_update
+from swarmloc.envs.filter.constants import MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_GRID, SPLIT_CI_STEPS
+from swarmloc.envs.filter.ekf_rows import inv3, joseph_part, scalar_update
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
 from swarmloc.envs.world.cost import SPLIT_CI_FLOPS, SPLIT_CI_RANGE_FLOPS, SPLIT_CI_REL_FLOPS
 
@@ -131,7 +131,7 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
     fresh, k, scratch = work[:6], work[6], work[7]
     rows = np.empty(n_l, dtype=np.int64)  # the peer channels that take part, in channel order
     # one allocation for the rest (views of it)
-    buf = np.empty(n_l * 10 + 2 + 4 * 9 + 6 * 36 + 2 * 18)
+    buf = np.empty(n_l * 10 + 2 + 15 * 9 + 2 * 18)
     h = buf[:3 * n_l].reshape((n_l, 3))  # range: u at the prior; relative position: m = p̂_j − z
     rng = buf[3 * n_l:4 * n_l]  # range at the prior
     r = buf[4 * n_l:5 * n_l]  # R0 / max(α, α_min)
@@ -142,10 +142,10 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
     omega = buf[at:at + n_l + 1]  # ω_0, ω_1, …, ω_m
     grad = buf[at + n_l + 1:at + 2 * n_l + 2]  # −∂ tr P⁺_pp / ∂ω
     at += 2 * n_l + 2
-    mats = buf[at:at + 36].reshape((4, 3, 3))
+    mats = buf[at:at + 72].reshape((8, 3, 3))
     S, Si = mats[0], mats[1]
-    big = buf[at + 36:at + 36 + 216].reshape((6, 6, 6))
-    gains = buf[at + 252:].reshape((2, 6, 3))
+    pre = buf[at + 72:at + 135].reshape((7, 3, 3))
+    gains = buf[at + 135:].reshape((2, 6, 3))
     K, G = gains[0], gains[1]
     flops = 0
     m = 0
@@ -205,15 +205,16 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
     for u in range(6):
         for v in range(6):
             N[u, v] += fresh[u, v]
+    _prepare(P, N, pre)
     # the weights: the best ω_0 of the grid with the Δ shares, then multiplicative steps towards
     # the minimum of tr P⁺ over the simplex (module docstring)
     best, best_w = np.inf, 0.5
-    for g in range(1, CI_GRID):
-        w = g / CI_GRID
+    for g in range(1, SPLIT_CI_GRID):
+        w = g / SPLIT_CI_GRID
         omega[0] = w
         for q in range(m):
             omega[q + 1] = (1.0 - w) * share[q]
-        f = _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, big,
+        f = _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats,
                           grad, False)
         if f < best:
             best, best_w = f, w
@@ -221,11 +222,11 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
     for q in range(m):
         omega[q + 1] = (1.0 - best_w) * share[q]
     for _ in range(SPLIT_CI_STEPS):
-        _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, big, grad,
+        _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, grad,
                       True)
         _multiplicative_step(omega, grad, m)
     # any weights on the simplex give a consistent update: the last ones, unless no update is better
-    f = _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, big, grad,
+    f = _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, grad,
                       False)
     if f < P[0, 0] + P[1, 1] + P[2, 2] + P[3, 3] + P[4, 4] + P[5, 5]:
         w = omega[0]
@@ -260,25 +261,52 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
 
 
 @njit(cache=True)
-def _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, big, grad,
-                 with_grad):
-    """tr P⁺ (the whole state) at the weights ``omega`` (ω_0 the UAV's, ω_{q+1} its q-th peer channel's), in
-    information form: (P⁺)⁻¹ = P1⁻¹ + E (Σ_j H_jᵀ R_j⁻¹ H_j) Eᵀ with P1 = D'/ω_0 + N', D' = P − N', E the
-    position rows.
+def _prepare(P, N, pre):
+    """The parts of tr P⁺ that do not depend on the weights (D' = P − N'): ``pre`` ``(7, 3, 3)`` gets
+    D'_pp, N'_pp, G_DD = A_Dᵀ A_D, G_DN + G_DNᵀ, G_NN (A_D = D'[:, :3], A_N = N'[:, :3]), and [0, 0] of the
+    last two holds tr D', tr N'."""
+    for u in range(3):
+        for v in range(3):
+            pre[0, u, v] = P[u, v] - N[u, v]
+            pre[1, u, v] = N[u, v]
+            dd = dn = nd = nn = 0.0
+            for a in range(6):
+                du, dv = P[a, u] - N[a, u], P[a, v] - N[a, v]
+                dd += du * dv
+                dn += du * N[a, v]
+                nd += N[a, u] * dv
+                nn += N[a, u] * N[a, v]
+            pre[2, u, v], pre[3, u, v], pre[4, u, v] = dd, dn + nd, nn
+    trd = trn = 0.0
+    for a in range(6):
+        trd += P[a, a] - N[a, a]
+        trn += N[a, a]
+    pre[5, 0, 0], pre[6, 0, 0] = trd, trn
 
-    With ``with_grad`` also ``grad[k]`` = −∂ tr P⁺ / ∂ω_k ≥ 0 (negative rounding clipped), with Q = P⁺²:
-    tr(Q P1⁻¹ D' P1⁻¹)/ω_0² for the UAV, (uᵀQ_pp u) uᵀD_j u/(ω_j R_j)² for a range,
-    tr(Q_pp R_j⁻¹ D_j R_j⁻¹)/ω_j² for a relative position. ``mats`` ``(4, 3, 3)``, ``big`` ``(6, 6, 6)``: scratch.
-    Returns +inf where P1 or P⁺⁻¹ is not positive definite (rounding on a vanishing D')."""
-    S, Si, T, U = mats[0], mats[1], mats[2], mats[3]
-    P1, Lam, Pplus, W, V, Q = big[0], big[1], big[2], big[3], big[4], big[5]
+
+@njit(cache=True)
+def _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, grad,
+                 with_grad):
+    """tr P⁺ (the whole state) at the weights ``omega`` (ω_0 the UAV's, ω_{q+1} its q-th peer channel's).
+
+    The rows touch the position only, so with P1 = D'/ω_0 + N' (D' = P − N'), A = P1[:, :3] and
+    M = Σ_j H_jᵀ R_j⁻¹ H_j (3×3), the push-through identity turns the 6×6 information form
+    (P⁺)⁻¹ = P1⁻¹ + E M Eᵀ into 3×3 algebra:
+        P⁺ = P1 − A X Aᵀ,   X = M (I + P1_pp M)⁻¹,   tr P⁺ = tr P1 − tr(X AᵀA),
+    where AᵀA = G_DD/ω_0² + (G_DN + G_DNᵀ)/ω_0 + G_NN comes from ``_prepare`` (``pre``).
+
+    With ``with_grad`` also ``grad[k]`` = −∂ tr P⁺ / ∂ω_k ≥ 0 (negative rounding clipped). With
+    B = (I + P1_pp M)⁻¹, the position block of P⁺² is Q_pp = B AᵀA Bᵀ, and P⁺ P1⁻¹ = Z = I − A X Eᵀ:
+    tr(Z D' Zᵀ)/ω_0² for the UAV, (uᵀQ_pp u) uᵀD_j u/(ω_j R_j)² for a range,
+    tr(Q_pp R_j⁻¹ D_j R_j⁻¹)/ω_j² for a relative position. ``mats`` ``(8, 3, 3)``: scratch.
+    Returns +inf where I + P1_pp M is singular (rounding on a vanishing D')."""
+    S, Si, T, U, Mm, Bi, X, G = mats[0], mats[1], mats[2], mats[3], mats[4], mats[5], mats[6], mats[7]
     w0 = omega[0]
-    for u in range(6):
-        for v in range(6):
-            P1[u, v] = (P[u, v] - N[u, v]) / w0 + N[u, v]
-    # Lam = P1⁻¹ + E M Eᵀ, M = Σ_j H_jᵀ R_j⁻¹ H_j
-    if not inv_spd6(P1, Lam, W):
-        return np.inf
+    iw = 1.0 / w0
+    # M = Σ_j H_jᵀ R_j⁻¹ H_j
+    for u in range(3):
+        for v in range(3):
+            Mm[u, v] = 0.0
     for q in range(m):
         om = omega[q + 1]
         l = rows[q]
@@ -287,7 +315,7 @@ def _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, p
             s = r[q] + a_n[q] + a_d[q] / om
             for u in range(3):
                 for v in range(3):
-                    Lam[u, v] += h[q, u] * h[q, v] / s
+                    Mm[u, v] += h[q, u] * h[q, v] / s
         else:
             # R_j = D_j / ω_j + N_j + r I
             Pj, Nj = prior_pp[target[l]], prior_ind_pp[target[l]]
@@ -297,36 +325,52 @@ def _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, p
             inv3(S, Si)
             for u in range(3):
                 for v in range(3):
-                    Lam[u, v] += Si[u, v]
-    if not inv_spd6(Lam, Pplus, W):
+                    Mm[u, v] += Si[u, v]
+    # T = I + P1_pp M, Bi = T⁻¹, X = M Bi, G = AᵀA
+    for u in range(3):
+        for v in range(3):
+            t = 0.0
+            for e in range(3):
+                t += (pre[0, u, e] * iw + pre[1, u, e]) * Mm[e, v]
+            T[u, v] = t + (1.0 if u == v else 0.0)
+            G[u, v] = (pre[2, u, v] * iw + pre[3, u, v]) * iw + pre[4, u, v]
+    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1]) - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))
+    if not det > 0.0:
         return np.inf
-    f = 0.0
-    for u in range(6):
-        f += Pplus[u, u]
+    inv3(T, Bi)
+    f = pre[5, 0, 0] * iw + pre[6, 0, 0]
+    for u in range(3):
+        for v in range(3):
+            X[u, v] = Mm[u, 0] * Bi[0, v] + Mm[u, 1] * Bi[1, v] + Mm[u, 2] * Bi[2, v]
+    for u in range(3):
+        for v in range(3):
+            f -= X[u, v] * G[v, u]
     if not with_grad:
         return f
-    # Q = P⁺²; W = P1⁻¹ (recomputed); V = D' P1⁻¹; g_0 = tr(Q P1⁻¹ D' P1⁻¹)/ω_0²
-    for u in range(6):
-        for v in range(6):
-            t = 0.0
-            for e in range(6):
-                t += Pplus[u, e] * Pplus[e, v]
-            Q[u, v] = t
-    inv_spd6(P1, W, V)
-    for u in range(6):
-        for v in range(6):
-            t = 0.0
-            for e in range(6):
-                t += (P[u, e] - N[u, e]) * W[e, v]
-            V[u, v] = t
+    # Q_pp = Bi G Biᵀ (in T)
+    _sandwich_t(Bi, G, T, U)
+    # g_0 ω_0² = tr(Z D' Zᵀ), Z = I − [A X, 0]: with W = A X (6×3), Z D' = D' − W D'[:3, :]
     g0 = 0.0
-    for u in range(6):
-        for v in range(6):
-            t = 0.0
-            for e in range(6):
-                t += W[u, e] * V[e, v]
-            g0 += Q[v, u] * t
-    grad[0] = max(g0, 0.0) / (w0 * w0)
+    for a in range(6):
+        w_0 = w_1 = w_2 = 0.0
+        for e in range(3):
+            ae = (P[a, e] - N[a, e]) * iw + N[a, e]
+            w_0 += ae * X[e, 0]
+            w_1 += ae * X[e, 1]
+            w_2 += ae * X[e, 2]
+        for b in range(6):
+            zd = (P[a, b] - N[a, b]) - (w_0 * (P[0, b] - N[0, b]) + w_1 * (P[1, b] - N[1, b])
+                                        + w_2 * (P[2, b] - N[2, b]))
+            zab = 1.0 if a == b else 0.0
+            if b == 0:
+                zab -= w_0
+            elif b == 1:
+                zab -= w_1
+            elif b == 2:
+                zab -= w_2
+            g0 += zd * zab
+    grad[0] = max(g0, 0.0) * iw * iw
     for q in range(m):
         om = omega[q + 1]
         l = rows[q]
@@ -335,7 +379,7 @@ def _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, p
             uqu = 0.0
             for u in range(3):
                 for v in range(3):
-                    uqu += h[q, u] * Q[u, v] * h[q, v]
+                    uqu += h[q, u] * T[u, v] * h[q, v]
             grad[q + 1] = max(uqu * a_d[q], 0.0) / (om * s) ** 2
         else:
             Pj, Nj = prior_pp[target[l]], prior_ind_pp[target[l]]
@@ -343,17 +387,28 @@ def _fused_trace(P, N, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, p
                 for v in range(3):
                     S[u, v] = (Pj[u, v] - Nj[u, v]) / om + Nj[u, v] + (r[q] if u == v else 0.0)
             inv3(S, Si)
-            # S ← D_j, T ← R_j⁻¹ D_j R_j⁻¹
+            # S ← D_j, X ← R_j⁻¹ D_j R_j⁻¹
             for u in range(3):
                 for v in range(3):
                     S[u, v] = Pj[u, v] - Nj[u, v]
-            _sandwich(Si, S, T, U)
+            _sandwich(Si, S, X, U)
             t = 0.0
             for u in range(3):
                 for v in range(3):
-                    t += Q[u, v] * T[v, u]
+                    t += T[u, v] * X[v, u]
             grad[q + 1] = max(t, 0.0) / (om * om)
     return f
+
+
+@njit(cache=True, inline="always")
+def _sandwich_t(B, M, out, tmp):
+    """out = B M Bᵀ for a 3×3 B and a symmetric 3×3 M (tmp: scratch)."""
+    for u in range(3):
+        for v in range(3):
+            tmp[u, v] = M[u, 0] * B[v, 0] + M[u, 1] * B[v, 1] + M[u, 2] * B[v, 2]
+    for u in range(3):
+        for v in range(3):
+            out[u, v] = B[u, 0] * tmp[0, v] + B[u, 1] * tmp[1, v] + B[u, 2] * tmp[2, v]
 
 
 @njit(cache=True, inline="always")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmloc.envs.filter.constants import SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import SPLIT_CI_GRID, SPLIT_CI_STEPS
 
 #: prediction of one UAV: x⁻ = F x + G u (18), block F P Fᵀ (63), Q (36), constants (2)
 PREDICT_FLOPS = 119
@@ -38,25 +38,26 @@ SPLIT_PREDICT_FLOPS = 63 + 36
 SPLIT_TRACK_ROW_FLOPS = 8 + 2 * (23 + 21 * 7)
 #: a symmetric positive definite 6×6 inverse by Cholesky: the factor (91 with 6 roots), L⁻¹ (76), L⁻ᵀ L⁻¹ (182)
 SPD6_INVERSE_FLOPS = 91 + 76 + 182
-#: one evaluation of the weight search's tr P⁺ (``split_ci._fused_trace``) without its peers: P1 = D'/ω + N'
-#: (108), two 6×6 inverses, the trace (5); its gradient: P⁺² (396), P1⁻¹ again, D' P1⁻¹ (432), the
-#: trace of P⁺² P1⁻¹ D' P1⁻¹ (468), 3
-SPLIT_CI_EVAL_FLOPS = 108 + 2 * SPD6_INVERSE_FLOPS + 5
-SPLIT_CI_GRAD_FLOPS = 396 + SPD6_INVERSE_FLOPS + 432 + 468 + 3
-#: once per UAV-step with peers: N' = N_old + N_new (36), the grid of ω_0 (49 evaluations), the
-#: multiplicative steps (SPLIT_CI_STEPS evaluations with their gradients and steps, 4 per source, then
-#: one more evaluation), the comparison with no update (6), P1 = D'/ω + N' (108)
-SPLIT_CI_FLOPS = (36 + (49 + SPLIT_CI_STEPS + 1) * SPLIT_CI_EVAL_FLOPS
+#: one evaluation of the weight search's tr P⁺ (``split_ci._fused_trace``) without its peers, in 3×3 form:
+#: I + P1_pp M (117), AᵀA (36), its determinant (17) and inverse (41), X = M (I + P1_pp M)⁻¹ (45), the
+#: trace (21); its gradient: Q_pp = B AᵀA Bᵀ (90), tr(Z D' Zᵀ) (702), 3
+SPLIT_CI_EVAL_FLOPS = 117 + 36 + 17 + 41 + 45 + 21
+SPLIT_CI_GRAD_FLOPS = 90 + 702 + 3
+#: once per UAV-step with peers: N' = N_old + N_new (36), the weight-free parts of tr P⁺ (``_prepare``,
+#: 560), the grid of ω_0 (SPLIT_CI_GRID − 1 evaluations), the multiplicative steps (SPLIT_CI_STEPS
+#: evaluations with their gradients and steps, 4 per source, then one more evaluation), the comparison
+#: with no update (6), P1 = D'/ω + N' (108)
+SPLIT_CI_FLOPS = (36 + 560 + (SPLIT_CI_GRID + SPLIT_CI_STEPS) * SPLIT_CI_EVAL_FLOPS
                   + SPLIT_CI_STEPS * (SPLIT_CI_GRAD_FLOPS + 4) + 6 + 108)
 #: per peer range: the model and u (12), uᵀD_j u, uᵀN_j u and P u (60), its share (6), each evaluation
-#: (R_j 3, the rank-one term 18), each gradient (R_j 3, uᵀQu 18, 5) and step (4), its row (the range
+#: (R_j 3, the rank-one term 27), each gradient (R_j 3, uᵀQu 36, 5) and step (4), its row (the range
 #: row's 135 + R_j 3) and N_new through it (8 + 23 + 21 × 7)
-SPLIT_CI_RANGE_FLOPS = (12 + 60 + 6 + (49 + SPLIT_CI_STEPS + 1) * 21 + SPLIT_CI_STEPS * (26 + 4) + 135 + 3
-                        + 8 + 23 + 21 * 7)
+SPLIT_CI_RANGE_FLOPS = (12 + 60 + 6 + (SPLIT_CI_GRID + SPLIT_CI_STEPS) * 30 + SPLIT_CI_STEPS * (44 + 4)
+                        + 135 + 3 + 8 + 23 + 21 * 7)
 #: per relative position: its share (S 12, inverse 45, tr(A S⁻¹ A) 54), each evaluation (R_j 36,
 #: inverse 45, sum 9), each gradient (R_j and its inverse 81, R_j⁻¹ D_j R_j⁻¹ 99, a trace 18, 2) and
 #: step (4), the 3-row block (S 36, inverse 45, gain 90, x 18, P 126) and N_new through it (21 × 45)
-SPLIT_CI_REL_FLOPS = (12 + 45 + 54 + (49 + SPLIT_CI_STEPS + 1) * 90 + SPLIT_CI_STEPS * (200 + 4)
+SPLIT_CI_REL_FLOPS = (12 + 45 + 54 + (SPLIT_CI_GRID + SPLIT_CI_STEPS) * 90 + SPLIT_CI_STEPS * (200 + 4)
                       + 36 + 45 + 90 + 18 + 126 + 21 * 45)
 
 
