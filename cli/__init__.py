@@ -70,6 +70,7 @@ COMMANDS: CommandTable = {
         "labels": "swarmloc.cli.reproduce:Labels",
         "calibration": "swarmloc.cli.reproduce:Calibration",
         "peer-update": "swarmloc.cli.reproduce:PeerUpdate",
+        "consistency": "swarmloc.cli.reproduce:Consistency",
         "shipped": "swarmloc.cli.reproduce:Shipped",
     },
     "bench": {

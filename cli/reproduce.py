@@ -238,6 +238,27 @@ class PeerUpdate:
 
 
 @dataclass
+class Consistency:
+    """Is the cooperative filter consistent, and does cooperating pay? Uniform's position NEES and RMSE under each
+    peer update (point, ci, split_ci) beside non-cooperative's RMSE, one task per simulated family with its faults
+    on and removed, and Scale N = 2 … 32 fault-free, on dev seeds."""
+
+    out: Path = Path("consistency.md")
+    """Markdown file to write (a folder: <out>/consistency.md); the rows go beside it as .json."""
+    seeds: int = 8
+    """Dev seeds per task (2_000_000 …), at least 2."""
+    tasks: list[str] = field(default_factory=list)
+    """Task IDs (default: one task per simulated family, swarmloc.bench.reproduce.consistency.FAMILY_TASKS)."""
+    scale: bool = True
+    """Also the Scale family's sizes N = 2 … 32 with the faults removed."""
+
+    def run(self) -> int:
+        from swarmloc.bench.reproduce.consistency import reproduce_consistency
+
+        return print_report(lambda: reproduce_consistency(self.out, self.seeds, self.tasks or None, scale=self.scale))
+
+
+@dataclass
 class Shipped:
     """Regenerate the shipped reference results of a suite (bench/results/<suite>/<method>.json)."""
 

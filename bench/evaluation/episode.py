@@ -84,6 +84,8 @@ class StepRecord:
         k: the update's index, 0-based (the update at t = (k + 1)·dt).
         t: its time [s].
         estimate, truth: ``(B, N, 3)`` posterior position and true position [m].
+        covariance: ``(B, N, 3, 3)`` the posterior position covariance the method holds (Track A:
+            the env's filter; Track B: the estimator's ``cov``, None when it reports none).
         valid: ``(B, N, L)`` measurements present in the update.
         label: ``(B, N, L)`` their injected-fault labels (analysis only, never a method's).
         applied: ``(B, N, L)`` trust applied in the update (Track A: the env's; Track B: the
@@ -100,12 +102,13 @@ class StepRecord:
         output: Track B: the ``EstimatorOutput`` it returned (checked, unclipped).
     """
 
-    __slots__ = ("applied", "estimate", "features", "flops", "k", "label", "measurements", "method_s", "output",
-                 "previous", "t", "terms", "trust", "truth", "valid")
+    __slots__ = ("applied", "covariance", "estimate", "features", "flops", "k", "label", "measurements", "method_s",
+                 "output", "previous", "t", "terms", "trust", "truth", "valid")
 
     def __init__(self) -> None:
         self.k, self.t, self.method_s = 0, 0.0, 0.0
         self.estimate = self.truth = self.valid = self.label = np.empty(0)
+        self.covariance: np.ndarray | None = None
         self.applied: np.ndarray | None = None
         self.previous: np.ndarray | None = None
         self.flops: np.ndarray | None = None
@@ -276,6 +279,7 @@ def _fly_policy(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
         cs, terms = env.step(trust)
         rec.k, rec.t, rec.features, rec.trust = k, t, inp if keep else None, trust
         rec.estimate, rec.truth, rec.valid, rec.label = cs.estimate, cs.truth, cs.update_valid, cs.label
+        rec.covariance = env.core.P[..., :3, :3]
         rec.applied, rec.previous, rec.flops, rec.terms = cs.applied, cs.prev_trust, terms.flops, terms
         for o in observers:
             o.observe(rec)
@@ -314,6 +318,7 @@ def _fly_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
         rec.k, rec.t, rec.measurements, rec.output = k, t, meas, out
         rec.estimate, rec.truth, rec.valid, rec.label = np.asarray(out.positions, dtype=np.float64), buf.pos, \
             buf.valid, buf.label
+        rec.covariance = None if out.cov is None else np.asarray(out.cov, dtype=np.float64)
         rec.applied, rec.previous = weights, previous
         rec.flops = None if out.flops is None else np.asarray(out.flops, dtype=np.float64)
         for o in observers:
