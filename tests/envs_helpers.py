@@ -85,7 +85,7 @@ def assert_kernel_matches_reference(spec: TaskSpec, world, x0, imu, z, valid, al
     x, P = x0.copy(), P0.copy()
     est = np.zeros_like(est_ref)
     cekf.cekf_run(x, P, *args, est, cekf.PEER_UPDATE_CODES[peer_update])
-    assert np.abs(est - est_ref).max() <= 1e-9
+    assert np.abs(est - est_ref).max() <= 1e-9, np.abs(est - est_ref).max()
     assert np.abs(P - P_ref).max() <= 1e-9
     return P0, args, P_ref
 

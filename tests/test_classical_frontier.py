@@ -329,3 +329,26 @@ PINNED_NLOS_V0_NIS: list[float] = [
     0.33307228618064033, 0.6417478800422246, 0.6114996129991755, 1.215738106330728, 0.5217095190296333,
     6.8414904615396095,
 ]
+
+
+@pytest.mark.parametrize("update", ["ci", "split_ci"])
+def test_every_path_runs_the_tasks_peer_update(update):
+    """TrustEstimator (Track B) and the separate batch kernels run the task's peer update, as the fused core does:
+    the same trust gives the same episodes (a path that fell back to ``"point"`` would differ at the first peer)."""
+    spec = get_spec("swarmloc/NLOS-v1", duration=4.0, filter={"peer_update": update})
+    seeds = [5, 1_000_001]
+    fused, unfused = LinkTrustCore(spec, 2), UnfusedCore(spec, 2)
+    fused.reset(seeds), unfused.reset(seeds)
+    rng = np.random.default_rng(2)
+    for _ in range(spec.n_steps - 1):
+        trust = rng.uniform(0.0, 1.0, (2, spec.n_uav, spec.n_channels))
+        a, b = fused.step(trust), unfused.step(trust)
+        np.testing.assert_allclose(a.estimate, b["estimate"], rtol=0, atol=1e-9)
+    core, _ = rollout(load_method("raim"), spec, seeds)
+    est = LoadedMethod(name="raim", entry_point="test", track="B", privileged=False, deterministic=True,
+                       method=TrustEstimator(load_method("raim").method))
+    track_b, _ = rollout(est, spec, seeds)
+    point, _ = rollout(load_method("raim"), get_spec("swarmloc/NLOS-v1", duration=4.0), seeds)
+    for x, y, p in zip(core, track_b, point):
+        assert x["rmse"] == pytest.approx(y["rmse"], rel=1e-9)
+        assert x["rmse"] != pytest.approx(p["rmse"], rel=1e-6)

@@ -56,6 +56,10 @@ class TrustEstimator:
         """Start B episodes from the prior ``x0`` ``(B, N, 6)`` with the stated initial std."""
         self.x, self.P = cekf_prior(facts, x0)
         self._facts = facts
+        # the task's peer update; "split_ci" carries the independent parts (all of P0: the initial errors are
+        # drawn independently)
+        self._peer_update = cekf.PEER_UPDATE_CODES[facts.peer_update]
+        self._P_ind = self.P.copy() if facts.peer_update == "split_ci" else None
         n_b, n, n_l = facts.batch_size, facts.n_uav, facts.n_channels
         self._prior_pos = np.zeros((n_b, n, 3))
         self._prev_imu = np.zeros((n_b, n, 3))
@@ -89,7 +93,7 @@ class TrustEstimator:
         valid = np.ascontiguousarray(meas.valid, dtype=np.bool_)
         imu = np.ascontiguousarray(meas.imu, dtype=np.float64)
         # x⁻ = F x + G u, P⁻ = F P Fᵀ + Q; broadcast priors for the peer channels
-        cekf.cekf_predict(self.x, self.P, imu, f.dt, f.imu_sigma, self._prior_pos)
+        cekf.cekf_predict(self.x, self.P, imu, f.dt, f.imu_sigma, self._prior_pos, self._P_ind)
         cekf.channel_features(self.x, self.P, z, valid, self._kind, self._target, self._r0, self._anchors,
                               self._landmarks, self._prior_pos, f.peer_nis_neighbour_cov, feat.resid, feat.pred,
                               feat.nis)
@@ -107,7 +111,8 @@ class TrustEstimator:
             raise ValueError(f"policy returned non-finite trust {alpha[bad]} at index {bad}")
         alpha = np.clip(alpha, 0.0, 1.0)
         cekf.cekf_update(self.x, self.P, z, valid, alpha, self._kind, self._target, self._r0, self._anchors,
-                         self._landmarks, self._prior_pos, f.alpha_th, f.alpha_min, self._active, self._flops)
+                         self._landmarks, self._prior_pos, f.alpha_th, f.alpha_min, self._active, self._flops,
+                         self._peer_update, self._P_ind)
         feat.applied[:] = alpha
         policy_flops = float(getattr(self.policy, "flops_per_channel", 0.0)) * valid.sum(axis=-1)
         return EstimatorOutput(positions=self.x[..., :3].copy(), cov=self.P[..., :3, :3].copy(),

@@ -48,6 +48,8 @@ class UnfusedCore:
         lay = self.world.layout
         n_b, n, n_l = batch_size, spec.n_uav, lay.n_channels
         self.x, self.P = np.zeros((n_b, n, 6)), np.zeros((n_b, n, 6, 6))
+        self.peer_update = cekf.PEER_UPDATE_CODES[spec.filter.peer_update]
+        self.P_ind = np.zeros_like(self.P) if spec.filter.peer_update == "split_ci" else None
         self.prior_pos, self.r0 = np.zeros((n_b, n, 3)), np.ascontiguousarray(lay.r0)
         self.z, self.valid = np.zeros((n_b, n, n_l, 3)), np.zeros((n_b, n, n_l), dtype=bool)
         self.out = {name: np.zeros((n_b, n, n_l)) for name in ("resid", "pred", "nis", "applied", "prev_trust")}
@@ -61,6 +63,8 @@ class UnfusedCore:
         f, o = self.spec.filter, self.out
         self.x[:] = self.world.reset(seeds)
         self.P[:] = cekf.initial_covariance(len(seeds), self.spec.n_uav, f.init_pos_sigma, f.init_vel_sigma)
+        if self.P_ind is not None:
+            self.P_ind[:] = self.P
         o["estimate"][:] = self.x[:, :, :3]
         o["truth"][:] = self.world.buffers.pos
         o["applied"][:] = o["prev_trust"][:] = 1.0
@@ -74,7 +78,8 @@ class UnfusedCore:
         """Apply ``trust`` ``(B, N, L)`` to the pending update, then sense and predict the next step."""
         w, s, lay, o = self.world, self.spec, self.world.layout, self.out
         cekf.cekf_update(self.x, self.P, self.z, self.valid, trust, lay.kind, lay.target, self.r0, w.anchors,
-                         w.landmarks, self.prior_pos, s.filter.alpha_th, s.filter.alpha_min, o["active"], o["flops"])
+                         w.landmarks, self.prior_pos, s.filter.alpha_th, s.filter.alpha_min, o["active"], o["flops"],
+                         self.peer_update, self.P_ind)
         o["estimate"][:] = self.x[:, :, :3]
         o["truth"][:] = w.buffers.pos
         o["label"][:] = w.buffers.label
@@ -89,7 +94,7 @@ class UnfusedCore:
         w, s, lay, o = self.world, self.spec, self.world.layout, self.out
         prev_imu = w.buffers.imu.copy()
         buf = w.sense()
-        cekf.cekf_predict(self.x, self.P, buf.imu, s.dt, s.sensors.imu_sigma, self.prior_pos)
+        cekf.cekf_predict(self.x, self.P, buf.imu, s.dt, s.sensors.imu_sigma, self.prior_pos, self.P_ind)
         self.z[:] = buf.z
         self.valid[:] = buf.valid
         cekf.channel_features(self.x, self.P, self.z, self.valid, lay.kind, lay.target, self.r0, w.anchors,

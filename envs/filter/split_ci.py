@@ -350,7 +350,9 @@ def _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_
         return f
     # Q_pp = Bi G Biᵀ (in T)
     _sandwich_t(Bi, G, T, U)
-    # g_0 ω_0² = tr(Z D' Zᵀ), Z = I − [A X, 0]: with W = A X (6×3), Z D' = D' − W D'[:3, :]
+    # g_0 ω_0² = tr(Z D' Zᵀ), Z = I − [A X, 0]: with W = A X (6×3), Z D' = D' − W D'[:3, :], summed
+    # elementwise; the expanded 3×3 form tr D' − 2 tr(X A_Dᵀ A) + tr(D'_pp X AᵀA X) is cheaper but cancels
+    # catastrophically where the peers dominate (GradualFault's followers: 0.45 m off the reference)
     g0 = 0.0
     for a in range(6):
         w_0 = w_1 = w_2 = 0.0
