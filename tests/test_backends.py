@@ -88,6 +88,19 @@ def test_serial_process_and_ray_give_identical_results(ray_cluster, tmp_path: Pa
         assert {(t.task, t.seed) for t in runs["pf"].traces} == {(t, SEEDS[0]) for t in SLICE_TASKS}
 
 
+def test_split_ci_backbone_gives_identical_results_on_every_backend(ray_cluster) -> None:
+    """The v2 backbone (split covariance intersection): serial, two worker processes and Ray, bit for bit."""
+    split = {**SHORT, "filter": {"peer_update": "split_ci"}}
+    common = dict(seeds_per_job=4, trace=False, progress=False, overrides=split)
+    methods = ["uniform", "chi2-gate"]
+    serial = evaluate_methods(methods, SLICE, backend="serial", **common)
+    expected = _files(serial, SLICE)
+    assert _files(evaluate_methods(methods, SLICE, backend="process", workers=2, **common), SLICE) == expected
+    assert _files(evaluate_methods(methods, SLICE, backend="ray", workers=2, **common), SLICE) == expected
+    point = _files(evaluate_methods(["uniform"], SLICE, backend="serial", **{**common, "overrides": SHORT}), SLICE)
+    assert point["uniform"]["episodes"] != expected["uniform"]["episodes"]  # the override took effect
+
+
 def test_chunking_does_not_change_batch_invariant_methods() -> None:
     # mappo is not among them: torch's kernels move its metrics by ~1e-9 with the batch size
     methods = ["random", "chi2-gate", "pf"]
