@@ -8,7 +8,7 @@ caches). The steps are timed in ``REPEATS`` blocks and the fastest block counts 
 ``timeit`` does): on a shared machine the slower blocks measure the neighbours.
 ``bench/speed/kernels.py`` prints ratios; run this file directly for the table alone.
 
-Rows: ``gymnasium`` (``gym.make`` NLOS-v0 with its wrappers, B=1), ``pettingzoo`` (parallel
+Rows: ``gymnasium`` (``gym.make`` Scale6-v0, the ``world`` rows' task, with its wrappers, B=1), ``pettingzoo`` (parallel
 API, B=1), ``gym-vector`` and ``torchrl`` (B = 1024, 4096), and when importable
 (``pip install -e .[bench]``) ``mpe2-simple-spread`` (PettingZoo parallel, B=1, 3 agents)
 and ``vmas-navigation`` (CPU, 4 agents, same B's).
@@ -21,7 +21,9 @@ from typing import Callable
 
 import numpy as np
 
-TASK = "swarmloc/NLOS-v0"
+#: the task of the ``world`` rows (``bench/speed/world.py``), so that an adapter's row reads beside the world step
+#: it wraps
+TASK = "swarmloc/Scale6-v0"
 BATCHES = (1024, 4096)
 REPEATS = 5
 

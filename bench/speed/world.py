@@ -8,6 +8,9 @@ Rows (``impl``), Scale6-v0 (6 UAVs, 13 channels each), uniform trust:
   (``World.sense``, ``cekf_update``, ``cekf_predict``, ``channel_features``) with NumPy
   copies in between: the core's path before the fused kernel (``UnfusedCore``; same
   numbers, ``tests/test_world_kernel.py`` holds the two equal).
+* ``world-v2`` — ``LinkTrustCore.step`` on the v2 backbone: Scale6-v1 with its peers fused by
+  split covariance intersection in the step kernel (``FilterSettings.peer_update = "split_ci"``).
+  The world's draws are still v1's.
 
 Only steps are timed, not resets; each figure is the best of a few repeats (the machine
 may be shared). ``env_steps_per_s`` counts episodes × steps per second,
@@ -28,6 +31,8 @@ from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.sim import World
 
 TASK = "swarmloc/Scale6-v0"
+#: the ``world-v2`` row: the Scale6 geometry on the v2 backbone
+V2_TASK, V2_OVERRIDES = "swarmloc/Scale6-v1", {"filter": {"peer_update": "split_ci"}}
 
 
 class UnfusedCore:
@@ -119,14 +124,16 @@ def time_steps(core: LinkTrustCore | UnfusedCore, batch: int, n_steps: int, repe
 
 
 def measure_rows(quick: bool = False) -> list[dict]:
-    """The ``world`` and ``world-unfused`` rows at every batch size (``quick``: ``QUICK_BATCHES``, short runs)."""
-    spec = get_spec(TASK)
+    """The ``world``, ``world-unfused`` and ``world-v2`` rows at every batch size (``quick``: ``QUICK_BATCHES``,
+    short runs)."""
+    spec, v2 = get_spec(TASK), get_spec(V2_TASK, **V2_OVERRIDES)
     rows = []
     for batch in QUICK_BATCHES if quick else BATCHES:
         n_steps = 20 if quick else (300 if batch <= 64 else 50)
         repeats = 2 if quick else (5 if batch <= 64 else 3)
-        for impl, make in (("world", LinkTrustCore), ("world-unfused", UnfusedCore)):
-            sec = time_steps(make(spec, batch), batch, n_steps, repeats)
+        for impl, make, task in (("world", LinkTrustCore, spec), ("world-unfused", UnfusedCore, spec),
+                                 ("world-v2", LinkTrustCore, v2)):
+            sec = time_steps(make(task, batch), batch, n_steps, repeats)
             rows.append({"impl": impl, "B": batch, "env_steps_per_s": batch * n_steps / sec,
                          "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
     return rows
