@@ -99,6 +99,8 @@ class TaskFacts:
             task has no VO sensor (then ``Measurements.velocity`` is None).
         peer_nis_neighbour_cov: a peer channel's observed NIS includes the neighbour's
             broadcast covariance (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks).
+        imu_bias_sigma: std of the constant per-episode accelerometer bias the world draws per UAV
+            and axis [m/s²] (``Sensors.imu_bias_sigma``; 0: none).
         peer_update: the task's CEKF peer update (``FilterSettings.peer_update``: ``"point"``,
             ``"ci"`` or ``"split_ci"``), for an estimator that runs the task's backbone.
     """
@@ -123,6 +125,7 @@ class TaskFacts:
     keys: np.ndarray
     velocity_sigma: float | None = None
     peer_nis_neighbour_cov: bool = False
+    imu_bias_sigma: float = 0.0
     peer_update: str = "point"
 
     @property
@@ -178,7 +181,8 @@ class TaskFacts:
             alpha_th=float(spec.filter.alpha_th), alpha_min=float(spec.filter.alpha_min),
             keys=_frozen_array(np.array(keys, dtype=np.int64)),
             velocity_sigma=None if spec.sensors.velocity_sigma is None else float(spec.sensors.velocity_sigma),
-            peer_nis_neighbour_cov=bool(spec.peer_nis_neighbour_cov), peer_update=spec.filter.peer_update,
+            peer_nis_neighbour_cov=bool(spec.peer_nis_neighbour_cov), imu_bias_sigma=float(spec.sensors.imu_bias_sigma),
+            peer_update=spec.filter.peer_update,
         )
 
 

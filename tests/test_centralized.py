@@ -16,6 +16,7 @@ from swarmloc.envs.filter.cekf_reference import run_reference
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.tasks.channels import ANCHOR, PEER
 from swarmloc.envs.tasks.seeds import DEV_SEED_START
+from swarmloc.envs.tasks.specs import Faults
 from swarmloc.envs.world.sim import World
 
 DEV = [DEV_SEED_START + i for i in range(4)]
@@ -45,8 +46,11 @@ def _play(est, spec, seeds, privileged=True, label_all=False):
 _GPS_DRIFT = {"duration": 20.0, "sensors": {"gps_sigma": [1.0]}, "scoring": {"nodes": [], "fault_window": None},
               "faults": {"gps_drifts": [{"nodes": [0], "start": 5.0, "end": 15.0, "rate": 0.5,
                                          "direction": [1.0, 1.0, 1.0]}]}}
-ONE_UAV = [("swarmloc/NLOS-v1", {"duration": 5.0}), ("swarmloc/TDOA-v1", {"duration": 5.0}),
-           ("swarmloc/Indoor-v1", {"duration": 5.0}), ("swarmloc/GradualFault-v1", _GPS_DRIFT)]
+# (the CEKF has no accelerometer-bias state: the tasks that draw a bias run here without it)
+_NO_BIAS = {"duration": 5.0, "sensors": {"imu_bias_sigma": 0.0}}
+ONE_UAV = [("swarmloc/NLOS-v1", {"duration": 5.0}), ("swarmloc/TDOA-v1", _NO_BIAS),
+           ("swarmloc/Indoor-v1", _NO_BIAS), ("swarmloc/GradualFault-v1", {**_GPS_DRIFT, "sensors": {
+               "gps_sigma": [1.0], "imu_bias_sigma": 0.0}})]
 
 
 @pytest.mark.parametrize("task, changes", ONE_UAV, ids=[t for t, _ in ONE_UAV])
@@ -94,6 +98,71 @@ def test_two_static_uavs_one_anchor_each_and_one_peer_range_match_the_closed_for
     np.testing.assert_allclose(x_post[0, :, 0], p[0, :, 0] + dx, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(x_post[0, :, 1:], x[0, :, 1:])
     assert used.tolist() == use.tolist()
+
+
+def _augmented_reference(x0, imu, z, use, anchors, dt, imu_sigma, P0, bias_sigma):
+    """A literal 9-state EKF of one UAV, [p, v, b], anchors only: x⁻ = F x + G u with F = [[I, dt I, −dt²/2 I],
+    [0, I, −dt I], [0, 0, I]], Q = σ² G Gᵀ (0 on b); every used range in one joint update at the prior, Joseph form."""
+    eye, zero = np.eye(3), np.zeros((3, 3))
+    F = np.block([[eye, dt * eye, -0.5 * dt * dt * eye], [zero, eye, -dt * eye], [zero, zero, eye]])
+    G = np.vstack([0.5 * dt * dt * eye, dt * eye, zero])
+    x = np.concatenate([x0, np.zeros(3)])
+    P = np.zeros((9, 9))
+    P[:6, :6], P[6:, 6:] = P0, bias_sigma**2 * eye
+    out = []
+    for k in range(len(imu)):
+        x, P = F @ x + G @ imu[k], F @ P @ F.T + imu_sigma**2 * G @ G.T
+        rows = [l for l in range(len(anchors)) if use[k, l]]
+        H = np.zeros((len(rows), 9))
+        y = np.zeros(len(rows))
+        for r, l in enumerate(rows):
+            d = x[:3] - anchors[l]
+            H[r, :3] = d / np.linalg.norm(d)
+            y[r] = z[k, l, 0] - np.linalg.norm(d)
+        R = np.eye(len(rows)) * SIGMA_NLOS**2
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        x = x + K @ y
+        I_KH = np.eye(9) - K @ H
+        P = I_KH @ P @ I_KH.T + K @ R @ K.T
+        out.append(x[:3].copy())
+    return np.array(out)
+
+
+SIGMA_NLOS = get_spec("swarmloc/NLOS-v1").sensors.anchor_sigma
+
+
+def test_the_accelerometer_bias_is_a_state_as_in_a_literal_augmented_ekf():
+    """One UAV of NLOS-v1 with a drawn accelerometer bias (σ_b = 0.1 m/s²): the joint filter carries b with its
+    prior and equals a literal 9-state EKF (the labelled channels left out in both)."""
+    spec = get_spec("swarmloc/NLOS-v1", n_uav=1, duration=5.0, sensors={"imu_bias_sigma": 0.1})
+    facts, x0, rec = _play(CentralizedOracle(), spec, DEV[:2])
+    assert facts.imu_bias_sigma == 0.1 and (facts.kind == ANCHOR).all()
+    P0 = cekf.initial_covariance(1, 1, facts.init_pos_sigma, facts.init_vel_sigma)[0, 0]
+    use = rec["valid"] & ~rec["labels"]
+    assert (rec["labels"] & rec["valid"]).any()
+    for b in range(2):
+        ref = _augmented_reference(x0[b, 0], rec["imu"][:, b, 0], rec["z"][:, b, 0], use[:, b, 0],
+                                   np.asarray(facts.anchors), facts.dt, facts.imu_sigma, P0, 0.1)
+        np.testing.assert_allclose(rec["pos"][:, b, 0], ref, rtol=0, atol=1e-9)
+
+
+def test_the_bias_state_makes_indoor_more_accurate_and_more_consistent():
+    """Indoor-v1 with its faults removed (4 dev seeds; its σ_b = 0.1 m/s²): with the bias state RMSE 0.427 m and
+    mean position NEES 4.61, without it (the facts' σ_b set to 0) 0.474 m and 5.66 (measured)."""
+    import dataclasses
+
+    class WithoutBias(CentralizedOracle):
+        def reset(self, facts, x0):
+            super().reset(dataclasses.replace(facts, imu_bias_sigma=0.0), x0)
+
+    spec = get_spec("swarmloc/Indoor-v1", faults=Faults().model_dump())
+    res = {}
+    for name, est in (("bias", CentralizedOracle()), ("none", WithoutBias())):
+        _, _, rec = _play(est, spec, DEV)
+        err = rec["pos"] - rec["truth"]
+        res[name] = (np.sqrt((err**2).sum(-1).mean()),
+                     np.einsum("tbni,tbnij,tbnj->tbn", err, np.linalg.inv(rec["cov"]), err).mean())
+    assert res["bias"][0] < 0.95 * res["none"][0] and res["bias"][1] < res["none"][1], res
 
 
 def test_fault_free_scale8_is_consistent_and_no_worse_than_uniform():

@@ -6,17 +6,20 @@ and its full covariance, as a fusion centre that receives every measurement woul
 achievable reference that shows what decentralization costs (docs/methods.md).
 
 **State.** x = [p_1 … p_N, v_1 … v_N] (6N), positions first so that every channel, which measures
-positions only, reads the leading 3N block; P is the full 6N × 6N covariance with every
-cross-covariance between UAVs. The per-UAV CEKF carries no other state (the world's per-episode
-accelerometer bias is not in it, nor in the public facts), so neither does this filter.
+positions only, reads the leading 3N block; P is the full covariance with every cross-covariance
+between UAVs. Where the task draws a constant accelerometer bias per UAV and episode
+(``TaskFacts.imu_bias_sigma`` = σ_b > 0: the world's IMU reads u = a + b + noise), the state adds
+b_1 … b_N (9N), a random constant with prior N(0, σ_b² I), as the information bound carries it.
 
-**Prediction**, every UAV with its own IMU reading u_i, exactly the CEKF's model
-(``cekf_reference.transition``): x_i⁻ = F x_i + G u_i, and for the joint covariance, with
-F = [[I, dt·I], [0, I]] per UAV and Q = σ_imu² G Gᵀ independent between UAVs,
+**Prediction**, every UAV with its own IMU reading u_i, the CEKF's model (``cekf_reference.transition``)
+with the bias taken out: x_i⁻ = F x_i + G (u_i − b_i), b_i⁻ = b_i. On the 3N × 3N blocks of P (k = 2
+block kinds p, v; k = 3 with b), with the per-axis coefficients f = [[1, dt], [0, 1]] (k = 3:
+[[1, dt, −dt²/2], [0, 1, −dt], [0, 0, 1]]) and q = σ_imu² G Gᵀ per axis (0 on the bias), independent
+between UAVs,
 
-    P_pp⁻ = P_pp + dt (P_pv + P_vp) + dt² P_vv + q_pp I,   P_pv⁻ = P_pv + dt P_vv + q_pv I,   P_vv⁻ = P_vv + q_vv I
+    P⁻[a, c] = Σ_{i, j} f[a, i] f[c, j] P[i, j] + q[a, c] I
 
-(the 3N × 3N blocks of P; q the entries of G Gᵀ σ_imu²): O((6N)²), no 6N × 6N product.
+(the nonzero f[a, i] only): O((kN)²), no kN × kN product.
 
 **Update**, at the prior x⁻, with every valid channel of every UAV that the episode does not
 label faulty. Each channel is a measurement of the joint state with the nominal R0 (trust 1):
@@ -53,13 +56,14 @@ measurement's own systematic error, NLOS bias or GPS drift or heavy-tail excess,
 ``envs/world/labels.py``) does not enter; that is the set the information bound leaves out
 (``bound.bound_labels``). The injected-fault labels also mark a peer link to a neighbour in an
 IMU fault window; a joint filter estimates that neighbour itself, so the range is informative
-and stays. Not modelled (as in the CEKF): the accelerometer bias and IMU-fault biases, visual
-odometry (``Measurements.velocity``).
+and stays. Not modelled: the IMU-fault biases (their windows are not in ``PrivilegedInfo``; the
+bound treats them as unknown there), visual odometry (``Measurements.velocity``).
 
-**Cost** per step and episode: the prediction O((6N)²), the channel rows O(N·L), the update two
-3N × 3N inversions and products (≈ 8 (3N)³) and P_·p D P_·pᵀ (≈ 2·6N·(3N)² + 2·(6N)²·3N), in
-all ≈ 17·(3N)³ flops: 0.2 MFLOP at N = 8, 15 MFLOP at N = 32. Memory B·(6N)² floats (B = 8, N = 32:
-3 MB). ``flops`` reports the whole swarm's count divided evenly among its UAVs.
+**Cost** per step and episode (``joint_flops``): the prediction 2·nnz(f)²·(3N)² (nnz(f) = 3, or 6 with
+the bias), the channel rows O(N·L), the update two 3N × 3N inversions and products (≈ 8 (3N)³) and
+P_·p D P_·pᵀ (≈ 2·k·3N·(3N)² + 2·(k·3N)²·3N), in all ≈ 17·(3N)³ flops without the bias (0.2 MFLOP
+at N = 8, 15 MFLOP at N = 32), ≈ 32·(3N)³ with it. Memory B·(3kN)² floats (B = 8, N = 32, k = 3: 6.4 MB).
+``flops`` reports the whole swarm's count divided evenly among its UAVs.
 """
 
 from __future__ import annotations
@@ -125,33 +129,56 @@ class JointLayout:
                     self.link[i, l, t] = 1.0
 
 
-def predict_joint(x: np.ndarray, P: np.ndarray, imu: np.ndarray, dt: float, imu_sigma: float) -> tuple[np.ndarray,
-                                                                                                       np.ndarray]:
+def block_model(dt: float, imu_sigma: float, with_bias: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The per-axis coefficients (f, q) of the prediction over the block kinds p, v (and b).
+
+    Returns:
+        f ``(k, k)``: x⁻ = F x on every axis, [[1, dt], [0, 1]] (with the bias [[1, dt, −dt²/2],
+        [0, 1, −dt], [0, 0, 1]]); q ``(k, k)``: σ_imu² G Gᵀ per axis, 0 on the bias.
+    """
+    F, G = transition(dt)
+    Q = imu_sigma**2 * G @ G.T
+    k = 3 if with_bias else 2
+    f, q = np.eye(k), np.zeros((k, k))
+    f[0, 1] = F[0, 3]
+    q[:2, :2] = [[Q[0, 0], Q[0, 3]], [Q[3, 0], Q[3, 3]]]
+    if with_bias:
+        # the bias enters as −b through G: ∂p/∂b = −dt²/2, ∂v/∂b = −dt
+        f[0, 2], f[1, 2] = -G[0, 0], -G[3, 0]
+    return f, q
+
+
+def predict_joint(x: np.ndarray, bias: np.ndarray | None, P: np.ndarray, imu: np.ndarray, dt: float,
+                  imu_sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """Propagate the joint state with every UAV's IMU (the module docstring's prediction).
 
     Args:
-        x: ``(B, N, 6)`` mean [p, v] per UAV.
-        P: ``(B, 6N, 6N)`` joint covariance, positions first.
+        x: ``(B, N, 6)`` mean [p, v] per UAV; bias: ``(B, N, 3)`` accelerometer bias estimate, or None
+            where the task has none.
+        P: ``(B, 3kN, 3kN)`` joint covariance, block kinds p, v (, b), each 3N wide.
         imu: ``(B, N, 3)`` accelerometer readings; dt: step [s]; imu_sigma: σ_imu [m/s²].
 
     Returns:
-        (x⁻, P⁻), new arrays.
+        (x⁻, P⁻), new arrays (the bias is constant).
     """
     F, G = transition(dt)
-    n3 = P.shape[-1] // 2
-    # x⁻ = F x + G u, UAV by UAV
-    x_prior = x @ F.T + imu @ G.T
-    # Q = σ_imu² G Gᵀ: per axis q_pp, q_pv, q_vv, the same for every UAV and independent between them
-    Q = imu_sigma**2 * G @ G.T
-    eye = np.eye(n3)
-    A, Bm, V = P[:, :n3, :n3], P[:, :n3, n3:], P[:, n3:, n3:]
-    # P⁻ = F P Fᵀ + Q on the 3N × 3N blocks (F = [[I, dt·I], [0, I]])
-    A_prior = A + dt * (Bm + Bm.transpose(0, 2, 1)) + dt * dt * V + Q[0, 0] * eye
-    B_prior = Bm + dt * V + Q[0, 3] * eye
-    V_prior = V + Q[3, 3] * eye
-    P_prior = np.concatenate([np.concatenate([A_prior, B_prior], axis=2),
-                              np.concatenate([B_prior.transpose(0, 2, 1), V_prior], axis=2)], axis=1)
-    return x_prior, P_prior
+    # x⁻ = F x + G (u − b), UAV by UAV
+    x_prior = x @ F.T + (imu if bias is None else imu - bias) @ G.T
+    f, q = block_model(dt, imu_sigma, bias is not None)
+    k = len(f)
+    n_b, n3 = P.shape[0], P.shape[-1] // k
+    blocks = P.reshape(n_b, k, n3, k, n3)
+    out = np.zeros_like(blocks)
+    # P⁻[a, c] = Σ f[a, i] f[c, j] P[i, j] + q[a, c] I over the nonzero coefficients
+    nz = [[(i, f[a, i]) for i in range(k) if f[a, i] != 0.0] for a in range(k)]
+    for a in range(k):
+        for c in range(k):
+            for i, fa in nz[a]:
+                for j, fc in nz[c]:
+                    out[:, a, :, c, :] += (fa * fc) * blocks[:, i, :, j, :]
+            if q[a, c] != 0.0:
+                out[:, a, np.arange(n3), c, np.arange(n3)] += q[a, c]
+    return x_prior, out.reshape(P.shape)
 
 
 def channel_information(p: np.ndarray, z: np.ndarray, use: np.ndarray,
@@ -215,13 +242,15 @@ def update_joint(x: np.ndarray, P: np.ndarray, Lam: np.ndarray, eta: np.ndarray)
     """The joint EKF update from the channels' information (the module docstring's update).
 
     Args:
-        x: ``(B, N, 6)`` prior mean; P: ``(B, 6N, 6N)`` prior covariance, positions first.
+        x: ``(B, N, 3k)`` prior mean per UAV, [p, v] (k = 2) or [p, v, b] (k = 3); P: ``(B, 3kN, 3kN)``
+            prior covariance, block kinds p, v (, b), positions first.
         Lam: ``(B, 3N, 3N)`` Σ Hᵀ R⁻¹ H; eta: ``(B, 3N)`` Σ Hᵀ R⁻¹ y, both at the prior.
 
     Returns:
         (x⁺, P⁺), new arrays.
     """
-    n_b, n = x.shape[:2]
+    n_b, n, width = x.shape
+    k = width // 3
     n3 = 3 * n
     A = P[:, :n3, :n3]
     Pp = P[:, :, :n3]
@@ -230,8 +259,9 @@ def update_joint(x: np.ndarray, P: np.ndarray, Lam: np.ndarray, eta: np.ndarray)
     M = W @ Lam
     # x⁺ = x⁻ + K y = x⁻ + P_·p W η
     dx = (Pp @ (W @ eta[..., None]))[..., 0]
-    flat = np.concatenate([x[..., :3].reshape(n_b, n3), x[..., 3:].reshape(n_b, n3)], axis=1) + dx
-    x_post = np.concatenate([flat[:, :n3].reshape(n_b, n, 3), flat[:, n3:].reshape(n_b, n, 3)], axis=2)
+    # per UAV [p, v (, b)] ↔ the blocks p_1 … p_N, v_1 … v_N (, b_1 … b_N)
+    flat = x.reshape(n_b, n, k, 3).transpose(0, 2, 1, 3).reshape(n_b, k * n3) + dx
+    x_post = flat.reshape(n_b, k, n, 3).transpose(0, 2, 1, 3).reshape(n_b, n, width)
     # P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ = P + P_·p (M A Mᵀ + W Λ Wᵀ − M − Mᵀ) P_·pᵀ  (Joseph form)
     Mt = M.transpose(0, 2, 1)
     D = M @ A @ Mt + W @ Lam @ W.transpose(0, 2, 1) - M - Mt
@@ -241,11 +271,12 @@ def update_joint(x: np.ndarray, P: np.ndarray, Lam: np.ndarray, eta: np.ndarray)
     return x_post, P_post
 
 
-def joint_flops(n_uav: int) -> float:
+def joint_flops(n_uav: int, with_bias: bool = False) -> float:
     """FLOPs of one step of the joint filter for the whole swarm (the module docstring's count)."""
-    n3 = 3 * n_uav
-    predict = 10 * n3 * n3 + 18 * n_uav
-    update = 8 * n3**3 + 2 * (2 * n3) * n3 * n3 + 2 * (2 * n3) ** 2 * n3
+    n3, k = 3 * n_uav, 3 if with_bias else 2
+    nnz = 6 if with_bias else 3
+    predict = 2 * nnz * nnz * n3 * n3 + 3 * n3 + 6 * 3 * n_uav
+    update = 8 * n3**3 + 2 * (k * n3) * n3 * n3 + 2 * (k * n3) ** 2 * n3
     return float(predict + update)
 
 
@@ -268,18 +299,25 @@ class CentralizedOracle:
         x, P_uav = cekf_prior(facts, x0)
         n_b, n = facts.batch_size, facts.n_uav
         n3 = 3 * n
-        self.x = x
-        # P0: every UAV's CEKF prior on the diagonal blocks, positions first
-        P = np.zeros((n_b, 2 * n3, 2 * n3))
+        self.with_bias = facts.imu_bias_sigma > 0.0
+        k = 3 if self.with_bias else 2
+        # the state per UAV: [p, v], and the bias (prior mean 0) where the task draws one
+        self.x = np.concatenate([x, np.zeros((n_b, n, 3))], axis=2) if self.with_bias else x
+        # P0: every UAV's CEKF prior on the diagonal blocks, positions first; σ_b² I on the bias, uncorrelated
+        P = np.zeros((n_b, k * n3, k * n3))
         for i in range(n):
-            for a, rows in ((0, slice(3 * i, 3 * i + 3)), (1, slice(n3 + 3 * i, n3 + 3 * i + 3))):
-                for c, cols in ((0, slice(3 * i, 3 * i + 3)), (1, slice(n3 + 3 * i, n3 + 3 * i + 3))):
-                    P[:, rows, cols] = P_uav[:, i, 3 * a:3 * a + 3, 3 * c:3 * c + 3]
+            for a in range(2):
+                for c in range(2):
+                    P[:, a * n3 + 3 * i:a * n3 + 3 * i + 3, c * n3 + 3 * i:c * n3 + 3 * i + 3] = \
+                        P_uav[:, i, 3 * a:3 * a + 3, 3 * c:3 * c + 3]
+        if self.with_bias:
+            idx = np.arange(2 * n3, 3 * n3)
+            P[:, idx, idx] = facts.imu_bias_sigma**2
         self.P = P
         self.layout = JointLayout(facts.kind, facts.target, facts.sigma, facts.anchors, facts.landmarks)
         self._facts = facts
         self._labels = None
-        self._flops = np.full((n_b, n), joint_flops(n) / n)
+        self._flops = np.full((n_b, n), joint_flops(n, self.with_bias) / n)
 
     def observe_privileged(self, info: PrivilegedInfo) -> None:
         """Receive the pending measurements' error labels ``(B, N, L)`` (the channels to leave out)."""
@@ -311,7 +349,11 @@ class CentralizedOracle:
                                "run it through the swarmloc runner, which passes labels to privileged methods")
         labels, self._labels = self._labels, None
         imu = np.asarray(meas.imu, dtype=np.float64)
-        self.x, self.P = predict_joint(self.x, self.P, imu, f.dt, f.imu_sigma)
+        if self.with_bias:
+            pv, P = predict_joint(self.x[..., :6], self.x[..., 6:], self.P, imu, f.dt, f.imu_sigma)
+            self.x, self.P = np.concatenate([pv, self.x[..., 6:]], axis=2), P
+        else:
+            self.x, self.P = predict_joint(self.x, None, self.P, imu, f.dt, f.imu_sigma)
         use = np.asarray(meas.valid, dtype=bool) & ~labels
         Lam, eta, _ = channel_information(self.x[..., :3], np.asarray(meas.z, dtype=np.float64), use, self.layout)
         self.x, self.P = update_joint(self.x, self.P, Lam, eta)
