@@ -268,13 +268,20 @@ class Shipped:
     """standard-v1 or standard-v0."""
     workers: int = 2
     """Worker processes."""
+    bounds_only: bool = False
+    """Recompute only the information bound (bound_rmse, and the aggregates and score that read it) of every
+    shipped file of the suite with the current bound; every other number stays as evaluated."""
 
     def run(self) -> int:
-        from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, regenerate, shipped_results
+        from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, refresh_bounds, regenerate, shipped_results
 
         if self.suite not in RESULTS_DIRS:
             print(f"error: suite {self.suite!r} has no shipped results; allowed: {', '.join(RESULTS_DIRS)}")
             return 2
+        if self.bounds_only:
+            for path in refresh_bounds(self.suite):
+                print(f"rewrote {path}")
+            return 0
         methods = list(self.methods) or [path.stem for path in shipped_results(RESULTS_DIRS[self.suite])]
         for path in regenerate(methods, self.suite, workers=self.workers):
             print(f"wrote {path}")

@@ -100,3 +100,24 @@ def test_shipped_learned_results_come_from_the_shipped_weights(method):
     rerun = run_episodes(method, [(shipped.task, shipped.seed)])[0]["metrics"]
     for key in ("rmse", "max_error", "jitter"):
         assert rerun[key] == pytest.approx(getattr(shipped.metrics, key), rel=1e-6), key
+
+
+def test_refresh_bounds_rewrites_the_bound_column_only(tmp_path):
+    """``swarmloc reproduce shipped --bounds-only``: bound_rmse becomes the current bound of each episode; every
+    other metric, the method and the provenance stay; the score's gap closed is recomputed from the new bound."""
+    from swarmloc.bench.evaluation.results import make_results, write_results
+    from swarmloc.bench.evaluation.shipped import refresh_bounds
+    from swarmloc.bench.scoring.bounds import episode_bounds
+
+    shipped = load_results(RESULTS_DIRS["standard-v1"] / "uniform.json")
+    keep = [e for e in shipped.episodes if e.task in ("swarmloc/Ideal-v1", "swarmloc/Scale4-v1") and e.seed < 1_000_002]
+    stale = [{"task": e.task, "seed": e.seed, "metrics": {**e.metrics.model_dump(), "bound_rmse": 123.0}} for e in keep]
+    write_results(tmp_path / "uniform.json", make_results(shipped.method, shipped.suite, stale, shipped.provenance))
+    (path,) = refresh_bounds("standard-v1", tmp_path)
+    fresh = load_results(path)
+    assert fresh.method == shipped.method and fresh.provenance == shipped.provenance
+    for old, new in zip(keep, fresh.episodes):
+        (bound,) = episode_bounds(old.task, [old.seed])
+        assert new.metrics.bound_rmse == bound.rmse != 123.0
+        assert new.metrics.model_dump(exclude={"bound_rmse"}) == old.metrics.model_dump(exclude={"bound_rmse"})
+    assert fresh.score.tasks["swarmloc/Ideal-v1"].achievable is not None

@@ -63,3 +63,43 @@ def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers:
     for name, run in runs.items():
         written.append(write_results(results_dir / f"{name}.json", run.results(suite)))
     return written
+
+
+def refresh_bounds(suite_name: str = DEFAULT_SUITE, results_dir: Path | None = None) -> list[Path]:
+    """Recompute ``bound_rmse`` in a suite's shipped results files with the current information bound.
+
+    The bound depends on the episode only (task spec and seed), never on the method, so a new
+    bound (``envs.filter.bound.BOUND_VERSION``) changes one column of every file and nothing
+    else: every other metric, the method and the provenance stay as evaluated; the aggregates
+    and the score block (whose gap closed reads the bound) are recomputed from the episodes.
+
+    Args:
+        suite_name: a suite of ``RESULTS_DIRS``.
+        results_dir: the files to refresh (default: the suite's shipped folder).
+
+    Returns:
+        The files rewritten (atomically, one by one).
+
+    Raises:
+        KeyError: the suite has no shipped results.
+    """
+    from swarmloc.bench.evaluation.results import load_results, make_results, write_results
+    from swarmloc.bench.scoring.bounds import episode_bounds
+
+    if suite_name not in RESULTS_DIRS:
+        raise KeyError(f"suite {suite_name!r} has no shipped results; allowed: {', '.join(RESULTS_DIRS)}")
+    written = []
+    for path in shipped_results(results_dir or RESULTS_DIRS[suite_name]):
+        results = load_results(path)
+        by_task: dict[str, list[int]] = {}
+        for e in results.episodes:
+            by_task.setdefault(e.task, []).append(e.seed)
+        bound = {(task, b.seed): b.rmse for task, seeds in by_task.items() for b in episode_bounds(task, seeds)}
+        episodes = []
+        for e in results.episodes:
+            metrics = e.metrics.model_dump()
+            if metrics["rmse"] is not None:
+                metrics["bound_rmse"] = bound[(e.task, e.seed)]
+            episodes.append({"task": e.task, "seed": e.seed, "metrics": metrics})
+        written.append(write_results(path, make_results(results.method, results.suite, episodes, results.provenance)))
+    return written
