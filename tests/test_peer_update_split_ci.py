@@ -288,7 +288,7 @@ def _mean_nees(task_id, seeds, update, **overrides):
 
 @pytest.mark.parametrize("sensors, point_above", [({}, 3.5), ({"anchor_max_range": 11.0}, 10.0)])
 def test_uniform_trust_is_consistent_on_fault_free_scale8(sensors, point_above):
-    """Scale8-v1 with its faults removed, 4 dev seeds: mean position NEES near 3 (measured 3.03; 2.27 with the
+    """Scale8-v1 with its faults removed, 4 dev seeds: mean position NEES near 3 (measured 3.03; 2.28 with the
     anchors ranged within 11 m, where the peers carry information), against 3.88 and 13.85 for ``point``."""
     seeds = list(range(DEV_SEED_START, DEV_SEED_START + 4))
     nees = _mean_nees("swarmloc/Scale8-v1", seeds, "split_ci", faults=FAULT_FREE, sensors=sensors)
@@ -312,10 +312,13 @@ def test_core_step_equals_the_batch_kernels():
     active, flops = np.zeros(valid.shape[1:], dtype=bool), np.zeros((len(seeds), spec.n_uav))
     for k in range(spec.n_steps - 1):
         x, P, N, prior = core.x.copy(), core.P.copy(), core.P_ind.copy(), core.x[..., :3].copy()
+        W = core.split_w.copy()
         cekf.cekf_update(x, P, z[k], valid[k], trust[k], lay.kind, lay.target, lay.r0, world.anchors,
-                         world.landmarks, prior, spec.filter.alpha_th, spec.filter.alpha_min, active, flops, SPLIT, N)
+                         world.landmarks, prior, spec.filter.alpha_th, spec.filter.alpha_min, active, flops, SPLIT, N,
+                         W)
         out = core.step(trust[k])
         assert np.abs(out.estimate - x[..., :3]).max() < 1e-7, k
+        assert np.abs(core.split_w - W).max() < 1e-6, k
         assert np.array_equal(out.flops, flops) and np.array_equal(out.active, active), k
         cekf.cekf_predict(x, P, imu[k + 1], spec.dt, spec.sensors.imu_sigma, prior, N)
         assert np.abs(core.P - P).max() < 1e-7 and np.abs(core.P_ind - N).max() < 1e-7, k
@@ -356,20 +359,27 @@ def test_without_peer_links_it_is_the_point_filter(task_id, over):
 
 
 def test_flops_count_what_runs():
-    """Scale4 at full trust: prediction of P and N, every anchor row and its bookkeeping, the peers' fusion."""
+    """Scale4 at full trust: prediction of P and N, every anchor row and its bookkeeping, the peers' fusion (a
+    cold weight search at the first update with peers, warm after it)."""
     spec = get_spec("swarmloc/Scale4-v1", filter={"peer_update": "split_ci"}, faults=FAULT_FREE, duration=3.0)
     core = LinkTrustCore(spec, 1)
     core.reset([7])
     kind = core.layout.kind
+    warm_seen = False
     for _ in range(spec.n_steps):
+        warm = core.split_w[0, :, 0] > 0.0
         out = core.step(np.ones((1, spec.n_uav, spec.n_channels)))
         n_anchor = (out.active[0] & (kind == ANCHOR)).sum(axis=-1)
         n_peer = (out.active[0] & (kind == PEER)).sum(axis=-1)
+        search = np.where(warm, cost.SPLIT_CI_WARM_FLOPS, cost.SPLIT_CI_FLOPS)
+        per_peer = np.where(warm, cost.SPLIT_CI_WARM_RANGE_FLOPS, cost.SPLIT_CI_RANGE_FLOPS)
         expected = (cost.PREDICT_FLOPS + cost.SPLIT_PREDICT_FLOPS
                     + n_anchor * (cost.RANGE_ROW_FLOPS + cost.SPLIT_TRACK_ROW_FLOPS)
-                    + np.where(n_peer > 0, cost.SPLIT_CI_FLOPS, 0) + n_peer * cost.SPLIT_CI_RANGE_FLOPS)
+                    + np.where(n_peer > 0, search, 0) + n_peer * per_peer)
         assert np.array_equal(out.flops[0], expected)
         assert n_peer.min() > 0
+        warm_seen |= warm.any()
+    assert warm_seen
 
 
 def test_world_md_quotes_the_costs():
@@ -378,7 +388,8 @@ def test_world_md_quotes_the_costs():
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "world.md").read_text(encoding="utf-8")
     for value in (cost.SPLIT_PREDICT_FLOPS, cost.SPLIT_TRACK_ROW_FLOPS, cost.SPLIT_CI_FLOPS, cost.SPLIT_CI_RANGE_FLOPS,
-                  cost.SPLIT_CI_REL_FLOPS):
+                  cost.SPLIT_CI_REL_FLOPS, cost.SPLIT_CI_WARM_FLOPS, cost.SPLIT_CI_WARM_RANGE_FLOPS,
+                  cost.SPLIT_CI_WARM_REL_FLOPS):
         assert f"{value:,}" in text, value
 
 

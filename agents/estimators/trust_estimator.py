@@ -60,6 +60,8 @@ class TrustEstimator:
         # drawn independently)
         self._peer_update = cekf.PEER_UPDATE_CODES[facts.peer_update]
         self._P_ind = self.P.copy() if facts.peer_update == "split_ci" else None
+        self._split_w = np.zeros((facts.batch_size, facts.n_uav, facts.n_channels + 1)) \
+            if facts.peer_update == "split_ci" else None
         n_b, n, n_l = facts.batch_size, facts.n_uav, facts.n_channels
         self._prior_pos = np.zeros((n_b, n, 3))
         self._prev_imu = np.zeros((n_b, n, 3))
@@ -112,7 +114,7 @@ class TrustEstimator:
         alpha = np.clip(alpha, 0.0, 1.0)
         cekf.cekf_update(self.x, self.P, z, valid, alpha, self._kind, self._target, self._r0, self._anchors,
                          self._landmarks, self._prior_pos, f.alpha_th, f.alpha_min, self._active, self._flops,
-                         self._peer_update, self._P_ind)
+                         self._peer_update, self._P_ind, self._split_w)
         feat.applied[:] = alpha
         policy_flops = float(getattr(self.policy, "flops_per_channel", 0.0)) * valid.sum(axis=-1)
         return EstimatorOutput(positions=self.x[..., :3].copy(), cov=self.P[..., :3, :3].copy(),

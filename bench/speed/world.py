@@ -55,6 +55,7 @@ class UnfusedCore:
         self.x, self.P = np.zeros((n_b, n, 6)), np.zeros((n_b, n, 6, 6))
         self.peer_update = cekf.PEER_UPDATE_CODES[spec.filter.peer_update]
         self.P_ind = np.zeros_like(self.P) if spec.filter.peer_update == "split_ci" else None
+        self.split_w = np.zeros((n_b, n, n_l + 1)) if spec.filter.peer_update == "split_ci" else None
         self.prior_pos, self.r0 = np.zeros((n_b, n, 3)), np.ascontiguousarray(lay.r0)
         self.z, self.valid = np.zeros((n_b, n, n_l, 3)), np.zeros((n_b, n, n_l), dtype=bool)
         self.out = {name: np.zeros((n_b, n, n_l)) for name in ("resid", "pred", "nis", "applied", "prev_trust")}
@@ -70,6 +71,7 @@ class UnfusedCore:
         self.P[:] = cekf.initial_covariance(len(seeds), self.spec.n_uav, f.init_pos_sigma, f.init_vel_sigma)
         if self.P_ind is not None:
             self.P_ind[:] = self.P
+            self.split_w[:] = 0.0
         o["estimate"][:] = self.x[:, :, :3]
         o["truth"][:] = self.world.buffers.pos
         o["applied"][:] = o["prev_trust"][:] = 1.0
@@ -84,7 +86,7 @@ class UnfusedCore:
         w, s, lay, o = self.world, self.spec, self.world.layout, self.out
         cekf.cekf_update(self.x, self.P, self.z, self.valid, trust, lay.kind, lay.target, self.r0, w.anchors,
                          w.landmarks, self.prior_pos, s.filter.alpha_th, s.filter.alpha_min, o["active"], o["flops"],
-                         self.peer_update, self.P_ind)
+                         self.peer_update, self.P_ind, self.split_w)
         o["estimate"][:] = self.x[:, :, :3]
         o["truth"][:] = w.buffers.pos
         o["label"][:] = w.buffers.label

@@ -93,7 +93,7 @@ def predict_covariance(P, dt, q):
 
 @njit(cache=True, inline="always")
 def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos, prior_pp, peer_update,
-               alpha_th, alpha_min, active, x0, hvec, c, P_ind, b, i, prior_ind_pp, work):
+               alpha_th, alpha_min, active, x0, hvec, c, P_ind, b, i, prior_ind_pp, work, W):
     """Trust-weighted joint update of one UAV over its L channels (in place).
 
     Args:
@@ -110,6 +110,8 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
             speed notices).
         prior_ind_pp: ``(N, 3, 3)`` ``"split_ci"``: the broadcast priors' independent position parts.
         work: ``(8, 6)`` scratch (``"split_ci"``: this step's own-noise part, a gain, a vector).
+        W: ``"split_ci"``: ``W[b, i]`` ``(L + 1,)`` the weights of the UAV's previous peer update, where this
+            one's search starts (all 0: cold; ``split_ci.split_ci_peers``), overwritten; unread otherwise.
 
     Returns:
         FLOPs of the step for this UAV (prediction + the rows applied, see ``cost.py``).
@@ -191,8 +193,7 @@ def update_uav(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prio
                           x0, hvec, c)
     elif split:
         flops += split_ci_peers(x, P, P_ind[b, i], work, z, valid, alpha, kind, target, r0, prior_pos, prior_pp,
-                                prior_ind_pp,
-                                alpha_th, alpha_min, active, x0, c)
+                                prior_ind_pp, alpha_th, alpha_min, active, x0, c, W[b, i])
     return flops
 
 
@@ -228,16 +229,17 @@ def cekf_predict(x, P, imu, dt, imu_sigma, prior_pos, P_ind=None):
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos,
-                alpha_th, alpha_min, active, flops, peer_update=0, P_ind=None):
+                alpha_th, alpha_min, active, flops, peer_update=0, P_ind=None, W=None):
     """Trust-weighted joint update of every UAV of every episode (in place).
 
     Shapes: x ``(B, N, 6)``, P ``(B, N, 6, 6)``, z ``(B, N, L, 3)``, valid/alpha/active
     ``(B, N, L)``, kind/target/r0 ``(N, L)``, prior_pos ``(B, N, 3)``, flops ``(B, N)`` output;
     P holds the priors on entry (``"ci"`` reads the neighbours' before any UAV updates).
     ``"split_ci"`` needs ``P_ind`` ``(B, N, 6, 6)``, the independent parts of P (prior in,
-    posterior out; ``split_ci.py``).
+    posterior out; ``split_ci.py``), and takes ``W`` ``(B, N, L + 1)``, the weights of every UAV's previous
+    peer update (in and out; zeros: a cold start); without ``W`` every call starts cold.
     """
-    n_b, n = x.shape[0], x.shape[1]
+    n_b, n, n_l = x.shape[0], x.shape[1], z.shape[2]
     if peer_update == 2 and P_ind is None:
         raise ValueError("peer_update 'split_ci' needs P_ind, the (B, N, 6, 6) independent parts of P")
     # the independent parts ("split_ci"; otherwise unread, a stand-in)
@@ -245,6 +247,10 @@ def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, pri
         N_all = np.zeros((1, 1, 6, 6))
     else:
         N_all = P_ind
+    if W is None:
+        W_all = np.zeros((n_b, n, n_l + 1) if peer_update == 2 else (1, 1, 1))
+    else:
+        W_all = W
     for b in prange(n_b):
         x0 = np.empty(6)
         hvec = np.empty(3)
@@ -262,19 +268,20 @@ def cekf_update(x, P, z, valid, alpha, kind, target, r0, anchors, landmarks, pri
             flops[b, i] = update_uav(x[b, i], P[b, i], z[b, i], valid[b, i], alpha[b, i], kind[i], target[i],
                                     r0[i], anchors, landmarks, prior_pos[b], prior_pp, peer_update, alpha_th,
                                     alpha_min,
-                                    active[b, i], x0, hvec, c, N_all, b, i, prior_ind_pp, work)
+                                    active[b, i], x0, hvec, c, N_all, b, i, prior_ind_pp, work, W_all)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, dt, imu_sigma,
-             alpha_th, alpha_min, est, peer_update=0, P_ind=None):
+             alpha_th, alpha_min, est, peer_update=0, P_ind=None, W=None):
     """Filter whole sequences: T predict+update steps per episode in one call.
 
     Shapes: imu ``(T, B, N, 3)``, z ``(T, B, N, L, 3)``, valid/alpha ``(T, B, N, L)``,
     est ``(T, B, N, 3)`` output posterior positions. Used for offline evaluation and the
     speed benchmark (no per-step Python dispatch). ``"split_ci"`` carries the independent
     parts in ``P_ind`` ``(B, N, 6, 6)`` (updated in place), or, without it, starts from P
-    all independent (an initial prior).
+    all independent (an initial prior), and the weights of the peer updates in ``W`` ``(B, N, L + 1)``
+    (updated in place), or, without it, starts them cold.
     """
     n_t, n_b, n, n_l = z.shape[0], z.shape[1], z.shape[2], z.shape[3]
     q = imu_sigma * imu_sigma
@@ -283,6 +290,10 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
         N_all = P.copy() if peer_update == 2 else np.zeros((1, 1, 6, 6))
     else:
         N_all = P_ind
+    if W is None:
+        W_all = np.zeros((n_b, n, n_l + 1) if peer_update == 2 else (1, 1, 1))
+    else:
+        W_all = W
     for b in prange(n_b):
         x0 = np.empty(6)
         hvec = np.empty(3)
@@ -305,7 +316,7 @@ def cekf_run(x, P, imu, z, valid, alpha, kind, target, r0, anchors, landmarks, d
             for i in range(n):
                 update_uav(x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
                            r0[i], anchors, landmarks, prior, prior_pp, peer_update, alpha_th, alpha_min, active, x0,
-                           hvec, c, N_all, b, i, prior_ind_pp, work)
+                           hvec, c, N_all, b, i, prior_ind_pp, work, W_all)
                 for d in range(3):
                     est[t, b, i, d] = x[b, i, d]
 

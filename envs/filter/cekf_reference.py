@@ -15,7 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmloc.envs.filter.constants import OMEGA_FLOOR, SPLIT_CI_GRID, SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import (OMEGA_FLOOR, SPLIT_CI_DEPENDENT_FLOOR, SPLIT_CI_GRID, SPLIT_CI_STEPS,
+                                            SPLIT_CI_WARM_MIX, SPLIT_CI_WARM_STEPS)
 from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
 
@@ -130,28 +131,35 @@ class PeerRows(NamedTuple):
     N: np.ndarray
     #: the rows' variance R0 / max(α, α_min)
     r: float
+    #: the channel's index among the UAV's L (where its weight of the previous update is kept)
+    slot: int = 0
 
 
 def split_ci_peer_update(x: np.ndarray, P: np.ndarray, N_old: np.ndarray, N_new: np.ndarray,
-                         peers: Sequence[PeerRows], grid: int = SPLIT_CI_GRID, steps: int = SPLIT_CI_STEPS):
+                         peers: Sequence[PeerRows], grid: int = SPLIT_CI_GRID, steps: int = SPLIT_CI_STEPS,
+                         previous: np.ndarray | None = None):
     """Split covariance intersection of all of a UAV's peer channels of a step (``split_ci`` docstring, steps 2–3).
 
     The dependent errors of the UAV (D = P − N_old − N_new) and of its neighbours (D_j) are bounded
     by blockdiag(D/ω_0, D_1/ω_1, …) with Σ ω = 1, the independent parts add on the diagonal. The
     weights minimise tr P⁺ (the whole state): the best ω_0 on {1/grid, …, (grid − 1)/grid} with the
     neighbours sharing 1 − ω_0 in proportion to Δ_j (the trace reduction of each alone at full weight),
-    then ``steps`` multiplicative steps; no update when the weights they reach do not lower tr P.
+    then ``steps`` multiplicative steps; no update when the weights they reach do not lower tr P. Warm
+    (``previous``, the UAV's weights of its previous update by channel slot, ω_0 first, with ω_0 > 0): the
+    start is ω_0 = previous ω_0 and each peer (1 − λ) previous + λ (1 − ω_0) Δ share, normalised
+    (λ = ``SPLIT_CI_WARM_MIX``), then ``SPLIT_CI_WARM_STEPS`` steps.
 
     Args:
         x, P: the UAV's mean and covariance after its absolute channels.
         N_old: ``(6, 6)`` the independent part its prior held, through the absolute update.
         N_new: ``(6, 6)`` the absolute update's own noise, K_a R_a K_aᵀ.
         peers: the peer channels, one per neighbour.
-        grid, steps: the ω_0 grid and the multiplicative steps after it.
+        grid, steps: the ω_0 grid and the multiplicative steps after it (a cold start).
+        previous: ``(L + 1,)`` the previous update's weights (all 0 or None: a cold start).
 
     Returns:
         (x⁺, P⁺, N⁺, ω), N⁺ = (I − K H) N_new (I − K H)ᵀ + K R_own Kᵀ the posterior's independent part and
-        ω ``(m + 1,)`` the weights (ω_0 = 1: no update).
+        ω ``(m + 1,)`` the weights the search reached (also when no update was better; without peers [1]).
     """
     no_update = (x.copy(), P.copy(), N_new.copy(), np.eye(len(peers) + 1)[0])
     if not peers:
@@ -168,12 +176,20 @@ def split_ci_peer_update(x: np.ndarray, P: np.ndarray, N_old: np.ndarray, N_new:
     def weights(w: float) -> np.ndarray:
         return np.concatenate([[w], (1.0 - w) * share])
 
-    best_w, best = 0.5, np.inf
-    for k in range(1, grid):
-        value = _fused_trace(P, N_ind, peers, weights(k / grid))[0]
-        if value < best:
-            best_w, best = k / grid, value
-    omega = weights(best_w)
+    if previous is not None and previous[0] > 0.0:
+        # (1 − λ) × the previous weights + λ × (ω_0 = 1/2, the neighbours sharing the other half by Δ)
+        start = np.concatenate([[(1.0 - SPLIT_CI_WARM_MIX) * previous[0] + 0.5 * SPLIT_CI_WARM_MIX],
+                                [(1.0 - SPLIT_CI_WARM_MIX) * previous[p.slot + 1] + 0.5 * SPLIT_CI_WARM_MIX * s
+                                 for p, s in zip(peers, share)]])
+        omega = start / start.sum()
+        steps = SPLIT_CI_WARM_STEPS
+    else:
+        best_w, best = 0.5, np.inf
+        for k in range(1, grid):
+            value = _fused_trace(P, N_ind, peers, weights(k / grid))[0]
+            if value < best:
+                best_w, best = k / grid, value
+        omega = weights(best_w)
     for _ in range(steps):
         g = _fused_trace(P, N_ind, peers, omega)[1]
         if (omega * np.sqrt(g)).sum() > 0.0:
@@ -182,7 +198,7 @@ def split_ci_peer_update(x: np.ndarray, P: np.ndarray, N_old: np.ndarray, N_new:
             omega = omega / omega.sum()
     # any weights on the simplex give a consistent update: the last ones, unless no update is better
     if not _fused_trace(P, N_ind, peers, omega)[0] < np.trace(P):
-        return no_update
+        return (*no_update[:3], omega)
     # P1 = D/ω_0 + N; R = blockdiag(J_j (D_j/ω_j + N_j) J_jᵀ + r_j I)
     prior = D / omega[0] + N_ind
     R = _block_diag([_dependent(p) / om + p.J @ p.N @ p.J.T + p.r * np.eye(len(p.y))
@@ -244,7 +260,8 @@ def _block_diag(blocks: list[np.ndarray]) -> np.ndarray:
 def split_ci_update_reference(x: np.ndarray, P: np.ndarray, N: np.ndarray, z: np.ndarray, valid: np.ndarray,
                               alpha: np.ndarray, kind: np.ndarray, target: np.ndarray, r0: np.ndarray,
                               anchors: np.ndarray, landmarks: np.ndarray, prior_pos: np.ndarray, prior_cov: np.ndarray,
-                              prior_ind: np.ndarray, alpha_th: float, alpha_min: float):
+                              prior_ind: np.ndarray, alpha_th: float, alpha_min: float,
+                              weights: np.ndarray | None = None):
     """One UAV's update under ``peer_update = "split_ci"`` (``split_ci`` docstring). Returns (x⁺, P⁺, N⁺, active).
 
     Args:
@@ -252,6 +269,8 @@ def split_ci_update_reference(x: np.ndarray, P: np.ndarray, N: np.ndarray, z: np
         z, valid, alpha, kind, target, r0, anchors, landmarks, prior_pos: as ``update_reference``.
         prior_cov, prior_ind: ``(N, 6, 6)`` every UAV's broadcast prior covariance and its independent part.
         alpha_th, alpha_min: the trust threshold and floor.
+        weights: ``(L + 1,)`` the UAV's weights of its previous peer update (ω_0 first, by channel; zeros: a
+            cold start), overwritten with this update's (zeros without peers); None: a cold start, not kept.
     """
     peers = np.isin(kind, (PEER, PEER_REL))
     # 1. the absolute channels, one joint update: N_old = T N Tᵀ, N_new = K R Kᵀ
@@ -276,9 +295,16 @@ def split_ci_update_reference(x: np.ndarray, P: np.ndarray, N: np.ndarray, z: np
         # ∂h/∂p_j = −∂h/∂p_i for a range and a relative position alike
         rows.append(PeerRows(y=y_l - H_l @ (x_abs - x), H=H_l, J=-H_l[:, :3],
                              D=prior_cov[j, :3, :3] - prior_ind[j, :3, :3], N=prior_ind[j, :3, :3],
-                             r=r0[l] / max(alpha[l], alpha_min)))
+                             r=r0[l] / max(alpha[l], alpha_min), slot=int(l)))
         active[l] = True
-    x_post, P_post, N_post, _ = split_ci_peer_update(x_abs, P_abs, N_old, N_new, rows)
+    x_post, P_post, N_post, omega = split_ci_peer_update(x_abs, P_abs, N_old, N_new, rows, previous=weights)
+    if weights is not None:
+        weights[:] = 0.0
+        # kept only where there are dependent parts for them to act on (SPLIT_CI_DEPENDENT_FLOOR)
+        dependent = np.trace(P_abs - N_old - N_new) + sum(np.trace(_dependent(p)) for p in rows)
+        if rows and dependent > SPLIT_CI_DEPENDENT_FLOOR * np.trace(P_abs):
+            weights[0] = omega[0]
+            weights[[p.slot + 1 for p in rows]] = omega[1:]
     return x_post, P_post, N_post, active
 
 
@@ -374,6 +400,8 @@ def run_reference(x: np.ndarray, P: np.ndarray, imu: np.ndarray, z: np.ndarray, 
     x, P = x.copy(), P.copy()
     N = P.copy() if P_ind is None else P_ind
     n_t, n_b, n = z.shape[:3]
+    # "split_ci": every UAV's weights of its previous peer update (zeros: the first search starts cold)
+    W = np.zeros((n_b, n, z.shape[3] + 1))
     est = np.zeros((n_t, n_b, n, 3))
     for t in range(n_t):
         for b in range(n_b):
@@ -388,7 +416,7 @@ def run_reference(x: np.ndarray, P: np.ndarray, imu: np.ndarray, z: np.ndarray, 
                 if peer_update == "split_ci":
                     x[b, i], P[b, i], N[b, i], _ = split_ci_update_reference(
                         x[b, i], P[b, i], N[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i],
-                        r0[i], anchors, landmarks, prior_pos, prior_cov, prior_ind, alpha_th, alpha_min)
+                        r0[i], anchors, landmarks, prior_pos, prior_cov, prior_ind, alpha_th, alpha_min, W[b, i])
                 else:
                     x[b, i], P[b, i], _ = update_reference(
                         x[b, i], P[b, i], z[t, b, i], valid[t, b, i], alpha[t, b, i], kind[i], target[i], r0[i],

@@ -55,7 +55,13 @@ consistent update, so the search only needs to be good:
   (Silvey, Titterington and Torsney 1978; Yu 2010): with many peers the best weights sit on a
   few of them, which a share by Δ alone misses (without the steps, uniform's RMSE is 5–9 % higher
   on Scale8 and Scale32 with the anchors ranged within 11 m, 4 dev seeds);
-- no peer update (ω_0 = 1) when the weights reached do not lower tr P'.
+- no peer update (ω_0 = 1) when the weights reached do not lower tr P';
+- warm starts: after a UAV's first update with peers its weights are kept by channel (``weights``), and
+  the next search starts from them mixed ``SPLIT_CI_WARM_MIX`` towards the cold start (ω_0 = 1/2, the
+  Δ shares of the other half), then takes ``SPLIT_CI_WARM_STEPS`` steps: the weights follow the
+  geometry from step to step instead of being searched again (``constants.py`` has the measurements).
+  They are not kept while there is no dependent part for them to act on (tr D' and the neighbours'
+  below ``SPLIT_CI_DEPENDENT_FLOOR`` tr P', as right after a reset).
 tr P⁺ is the information form (P⁺)⁻¹ = P1⁻¹ + E (Σ_j H_jᵀ R_j⁻¹ H_j) Eᵀ (E the position rows) turned
 by the push-through identity into 3×3 algebra (``_fused_trace``), and g its derivative. The update itself applies the
 neighbours' blocks one after the other (exact, R being block diagonal): a range as one scalar row
@@ -81,10 +87,12 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.envs.filter.constants import MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_GRID, SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import (MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_DEPENDENT_FLOOR, SPLIT_CI_GRID,
+                                            SPLIT_CI_STEPS, SPLIT_CI_WARM_MIX, SPLIT_CI_WARM_STEPS)
 from swarmloc.envs.filter.ekf_rows import inv3, joseph_part, scalar_update
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
-from swarmloc.envs.world.cost import SPLIT_CI_FLOPS, SPLIT_CI_RANGE_FLOPS, SPLIT_CI_REL_FLOPS
+from swarmloc.envs.world.cost import (SPLIT_CI_FLOPS, SPLIT_CI_RANGE_FLOPS, SPLIT_CI_REL_FLOPS, SPLIT_CI_WARM_FLOPS,
+                                      SPLIT_CI_WARM_RANGE_FLOPS, SPLIT_CI_WARM_REL_FLOPS)
 
 
 @njit(cache=True, inline="always")
@@ -113,7 +121,7 @@ def _tr_asa(P, Si):
 
 @njit(cache=True)
 def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, prior_ind_pp,
-                   alpha_th, alpha_min, active, x0, c):
+                   alpha_th, alpha_min, active, x0, c, weights):
     """Step 2 and 3 of the module docstring for one UAV (in place). Returns the FLOPs of its peer channels.
 
     Args:
@@ -126,6 +134,8 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
         active: ``(L,)`` output, set for the peer channels that take part.
         x0: ``(6,)`` the prior mean (every row is linearised at it).
         c: scratch 6-vector.
+        weights: ``(L + 1,)`` the weights of the UAV's previous update, ω_0 first, then each channel's (0 where
+            it took no part); all 0: none (a cold start). Overwritten with this update's.
     """
     n_l = kind.shape[0]
     fresh, k, scratch = work[:6], work[6], work[7]
@@ -150,6 +160,8 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
     flops = 0
     m = 0
     total = 0.0
+    warm = weights[0] > 0.0
+    dep = 0.0  # the dependent parts the weights act on: Σ uᵀD_j u (ranges) + Σ tr D_j (relative positions)
     for l in range(n_l):
         ch = kind[l]
         if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):
@@ -177,9 +189,10 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
                 upu += h[m, u] * pu
             # a dependent variance that rounding left below 0 counts as 0
             a_d[m], a_n[m] = max(ad, 0.0), an
+            dep += a_d[m]
             # Δ_j = ‖P_pp u‖² / (uᵀP u + uᵀP_j u + r)
             share[m] = pu2 / (upu + ad + an + rl)
-            flops += SPLIT_CI_RANGE_FLOPS
+            flops += SPLIT_CI_WARM_RANGE_FLOPS if warm else SPLIT_CI_RANGE_FLOPS
         else:
             for d in range(3):
                 h[m, d] = prior_pos[j, d] - z[l, d]
@@ -189,7 +202,8 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
                     S[u, v] = P[u, v] + Pj[u, v] + (rl if u == v else 0.0)
             inv3(S, Si)
             share[m] = _tr_asa(P, Si)
-            flops += SPLIT_CI_REL_FLOPS
+            dep += max(Pj[0, 0] - Nj[0, 0] + Pj[1, 1] - Nj[1, 1] + Pj[2, 2] - Nj[2, 2], 0.0)
+            flops += SPLIT_CI_WARM_REL_FLOPS if warm else SPLIT_CI_REL_FLOPS
         rows[m] = l
         r[m] = rl
         total += share[m]
@@ -197,8 +211,9 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
         m += 1
     if m == 0:
         N[:, :] = fresh
+        weights[:] = 0.0  # no peers: the next search starts cold
         return flops
-    flops += SPLIT_CI_FLOPS
+    flops += SPLIT_CI_WARM_FLOPS if warm else SPLIT_CI_FLOPS
     for q in range(m):
         share[q] /= total
     # N' = N_old + N_new (D' = P − N')
@@ -206,25 +221,48 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
         for v in range(6):
             N[u, v] += fresh[u, v]
     _prepare(P, N, pre)
-    # the weights: the best ω_0 of the grid with the Δ shares, then multiplicative steps towards
-    # the minimum of tr P⁺ over the simplex (module docstring)
-    best, best_w = np.inf, 0.5
-    for g in range(1, SPLIT_CI_GRID):
-        w = g / SPLIT_CI_GRID
+    # the weights: the best ω_0 of the grid with the Δ shares (warm: the previous update's weights, each
+    # mixed with its Δ-share start), then multiplicative steps towards the minimum of tr P⁺ over the
+    # simplex (module docstring)
+    if warm:
+        w = weights[0]
         omega[0] = w
+        norm = w
+        omega[0] = (1.0 - SPLIT_CI_WARM_MIX) * w + 0.5 * SPLIT_CI_WARM_MIX
+        norm = omega[0]
         for q in range(m):
-            omega[q + 1] = (1.0 - w) * share[q]
-        f = _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats,
-                          grad, False)
-        if f < best:
-            best, best_w = f, w
-    omega[0] = best_w
-    for q in range(m):
-        omega[q + 1] = (1.0 - best_w) * share[q]
-    for _ in range(SPLIT_CI_STEPS):
+            omega[q + 1] = (1.0 - SPLIT_CI_WARM_MIX) * weights[rows[q] + 1] + 0.5 * SPLIT_CI_WARM_MIX * share[q]
+            norm += omega[q + 1]
+        for q in range(m + 1):
+            omega[q] /= norm
+        n_steps = SPLIT_CI_WARM_STEPS
+    else:
+        best, best_w = np.inf, 0.5
+        for g in range(1, SPLIT_CI_GRID):
+            w = g / SPLIT_CI_GRID
+            omega[0] = w
+            for q in range(m):
+                omega[q + 1] = (1.0 - w) * share[q]
+            f = _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats,
+                             grad, False)
+            if f < best:
+                best, best_w = f, w
+        omega[0] = best_w
+        for q in range(m):
+            omega[q + 1] = (1.0 - best_w) * share[q]
+        n_steps = SPLIT_CI_STEPS
+    for _ in range(n_steps):
         _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, grad,
-                      True)
+                     True)
         _multiplicative_step(omega, grad, m)
+    # the next update starts from these weights, unless they act on nothing (no dependent part left: every
+    # weight gives the same update, and the steps only followed the gradients' rounding)
+    weights[:] = 0.0
+    if dep + P[0, 0] - N[0, 0] + P[1, 1] - N[1, 1] + P[2, 2] - N[2, 2] + P[3, 3] - N[3, 3] + P[4, 4] - N[4, 4] \
+            + P[5, 5] - N[5, 5] > SPLIT_CI_DEPENDENT_FLOOR * (P[0, 0] + P[1, 1] + P[2, 2] + P[3, 3] + P[4, 4] + P[5, 5]):
+        weights[0] = omega[0]
+        for q in range(m):
+            weights[rows[q] + 1] = omega[q + 1]
     # any weights on the simplex give a consistent update: the last ones, unless no update is better
     f = _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_pp, prior_ind_pp, mats, grad,
                       False)

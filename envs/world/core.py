@@ -94,7 +94,11 @@ class LinkTrustCore:
         self.P = np.zeros((n_b, n, 6, 6))
         #: ``(B, N, 6, 6)`` the independent part of P under ``peer_update = "split_ci"`` (``cekf``'s
         #: ``split_ci.py``); ``(0, 0, 6, 6)`` under the other updates
-        self.P_ind = np.zeros((n_b, n, 6, 6) if spec.filter.peer_update == "split_ci" else (0, 0, 6, 6))
+        split = spec.filter.peer_update == "split_ci"
+        self.P_ind = np.zeros((n_b, n, 6, 6) if split else (0, 0, 6, 6))
+        #: ``(B, N, L + 1)`` under ``"split_ci"``: the weights of every UAV's previous peer update, where the next
+        #: one's search starts (zeros: cold); ``(0, 0, 1)`` under the other updates
+        self.split_w = np.zeros((n_b, n, n_l + 1) if split else (0, 0, 1))
         self._prior_pos = np.zeros((n_b, n, 3))
         self._r0 = np.ascontiguousarray(self.layout.r0)
         #: ``(N, L)`` error-label threshold per channel (the world's, so that its own-error labels
@@ -129,7 +133,8 @@ class LinkTrustCore:
             target=self.layout.target, r0=self._r0, sigma=np.ascontiguousarray(self.layout.sigma),
             label_threshold=self.label_threshold, anchors=w.anchors, landmarks=w.landmarks, world_pos=buf.pos,
             world_imu=buf.imu, world_z=buf.z, world_valid=buf.valid, world_label=buf.label,
-            world_systematic=buf.systematic, x=self.x, P=self.P, P_ind=self.P_ind, prior_pos=self._prior_pos,
+            world_systematic=buf.systematic, x=self.x, P=self.P, P_ind=self.P_ind, split_w=self.split_w,
+            prior_pos=self._prior_pos,
             imu_prev=np.zeros_like(buf.imu), pending_sigmas=self.pending_systematic_sigmas,
             pending_error_label=self.pending_error_label, resid=o.resid, pred=o.pred, nis=o.nis,
             valid=o.valid, jerk=o.jerk, estimate=o.estimate, truth=o.truth, label=o.label, error_label=o.error_label,
@@ -182,6 +187,7 @@ class LinkTrustCore:
         self.P[idx] = cekf.initial_covariance(len(idx), self.n_uav, f.init_pos_sigma, f.init_vel_sigma)
         if len(self.P_ind):  # "split_ci": the initial errors are drawn independently, P0 is all independent
             self.P_ind[idx] = self.P[idx]
+            self.split_w[idx] = 0.0  # the first peer update's weight search starts cold
         o.estimate[idx] = self.x[idx, :, :3]
         o.truth[idx] = w.buffers.pos[idx]
         o.prev_trust[idx] = 1.0

@@ -66,6 +66,8 @@ class FilterArrays(NamedTuple):
 
     Filter state:
         x: ``(B, N, 6)`` mean [p, v]; P ``(B, N, 6, 6)`` covariance (the prior at the pending step).
+        split_w: ``(B, N, L + 1)`` under ``"split_ci"``: the weights of every UAV's previous peer update
+            (``split_ci.split_ci_peers``; zeros after a reset); ``(0, 0, 1)`` (never read) otherwise.
         P_ind: ``(B, N, 6, 6)`` the independent part of P under ``"split_ci"``; ``(0, 0, 6, 6)``
             (never read) under the other updates.
         prior_pos: ``(B, N, 3)`` the broadcast prior positions (peer channels linearise at them).
@@ -109,6 +111,7 @@ class FilterArrays(NamedTuple):
     x: np.ndarray
     P: np.ndarray
     P_ind: np.ndarray
+    split_w: np.ndarray
     prior_pos: np.ndarray
     imu_prev: np.ndarray
     pending_sigmas: np.ndarray
@@ -174,7 +177,8 @@ def step_episodes(w: WorldInputs | None, fs: FaultSchedule | None, f: FilterArra
             flops = update_uav(f.x[b, i], f.P[b, i], f.world_z[b, i], f.world_valid[b, i], trust[b, i], f.kind[i],
                                f.target[i], f.r0[i], f.anchors, f.landmarks, f.prior_pos[b], prior_pp,
                                f.peer_update, f.alpha_th,
-                               f.alpha_min, f.active[b, i], x0, hvec, c, f.P_ind, b, i, prior_ind_pp, work)
+                               f.alpha_min, f.active[b, i], x0, hvec, c, f.P_ind, b, i, prior_ind_pp, work,
+                               f.split_w)
             if live:
                 f.flops[b, i] = flops
                 for d in range(3):

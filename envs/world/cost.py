@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmloc.envs.filter.constants import SPLIT_CI_GRID, SPLIT_CI_STEPS
+from swarmloc.envs.filter.constants import SPLIT_CI_GRID, SPLIT_CI_STEPS, SPLIT_CI_WARM_STEPS
 
 #: prediction of one UAV: x⁻ = F x + G u (18), block F P Fᵀ (63), Q (36), constants (2)
 PREDICT_FLOPS = 119
@@ -59,6 +59,14 @@ SPLIT_CI_RANGE_FLOPS = (12 + 60 + 6 + (SPLIT_CI_GRID + SPLIT_CI_STEPS) * 30 + SP
 #: step (4), the 3-row block (S 36, inverse 45, gain 90, x 18, P 126) and N_new through it (21 × 45)
 SPLIT_CI_REL_FLOPS = (12 + 45 + 54 + (SPLIT_CI_GRID + SPLIT_CI_STEPS) * 90 + SPLIT_CI_STEPS * (200 + 4)
                       + 36 + 45 + 90 + 18 + 126 + 21 * 45)
+#: the same after a warm start (the previous update's weights, mixed with the shares: 4 per source, 1 to
+#: normalise): SPLIT_CI_WARM_STEPS evaluations with their gradients and steps, then one more, no grid
+SPLIT_CI_WARM_FLOPS = (36 + 560 + 2 + (SPLIT_CI_WARM_STEPS + 1) * SPLIT_CI_EVAL_FLOPS
+                       + SPLIT_CI_WARM_STEPS * (SPLIT_CI_GRAD_FLOPS + 4) + 6 + 108)
+SPLIT_CI_WARM_RANGE_FLOPS = (12 + 60 + 6 + 5 + (SPLIT_CI_WARM_STEPS + 1) * 30 + SPLIT_CI_WARM_STEPS * (44 + 4)
+                             + 135 + 3 + 8 + 23 + 21 * 7)
+SPLIT_CI_WARM_REL_FLOPS = (12 + 45 + 54 + 5 + (SPLIT_CI_WARM_STEPS + 1) * 90 + SPLIT_CI_WARM_STEPS * (200 + 4)
+                           + 36 + 45 + 90 + 18 + 126 + 21 * 45)
 
 
 def filter_flops(n_range_rows: np.ndarray, n_vector_rows: np.ndarray, n_tdoa_rows: np.ndarray | int = 0) -> np.ndarray:
