@@ -17,6 +17,7 @@ peer range and P_i⁻ + P_j⁻ + R0 I for a relative position (``TaskSpec.peer_n
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from swarmloc.envs.tasks.channels import N_KINDS, OBS_KIND_COLUMN
 from swarmloc.envs.world.core import CoreStep
@@ -57,14 +58,26 @@ def build_observation(step: CoreStep, one_hot: np.ndarray, out: np.ndarray | Non
     n_b, n, n_l = step.resid.shape
     if out is None:
         out = np.empty((n_b, n, n_l, N_FEATURES), dtype=np.float32)
-    valid = step.valid
-    out[..., INNOVATION] = squash(step.resid, SCALE_INNOVATION)
-    out[..., DISTANCE] = squash(step.pred, SCALE_DISTANCE)
-    out[..., PREV_TRUST] = step.applied
-    out[..., JERK] = squash(step.jerk, SCALE_JERK)[..., None]
-    out[..., NIS] = squash(step.nis, SCALE_NIS)
-    out[..., KIND0:KIND0 + N_KINDS] = one_hot
-    out[..., VALID] = valid
-    # absent measurements carry no innovation information
-    out[..., [INNOVATION, DISTANCE, NIS]] *= valid[..., None]
+    _fill(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out)
     return out
+
+
+@njit(cache=True)
+def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out):
+    """``build_observation`` in one pass (float64 arithmetic, rounded to float32 once, as NumPy's
+    assignments round; absent measurements carry no innovation, distance or NIS)."""
+    n_b, n, n_l = resid.shape
+    for b in range(n_b):
+        for i in range(n):
+            jk = jerk[b, i] / (jerk[b, i] + SCALE_JERK)
+            for l in range(n_l):
+                v = 1.0 if valid[b, i, l] else 0.0
+                o = out[b, i, l]
+                o[INNOVATION] = resid[b, i, l] / (resid[b, i, l] + SCALE_INNOVATION) * v
+                o[DISTANCE] = pred[b, i, l] / (pred[b, i, l] + SCALE_DISTANCE) * v
+                o[PREV_TRUST] = applied[b, i, l]
+                o[JERK] = jk
+                o[NIS] = nis[b, i, l] / (nis[b, i, l] + SCALE_NIS) * v
+                for k in range(N_KINDS):
+                    o[KIND0 + k] = one_hot[i, l, k]
+                o[VALID] = v
