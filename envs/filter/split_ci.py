@@ -221,14 +221,12 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
         for v in range(6):
             N[u, v] += fresh[u, v]
     _prepare(P, N, pre)
-    # the weights: the best ω_0 of the grid with the Δ shares (warm: the previous update's weights, each
-    # mixed with its Δ-share start), then multiplicative steps towards the minimum of tr P⁺ over the
-    # simplex (module docstring)
+    # the weights: the best ω_0 of the grid with the Δ shares (warm: the previous update's weights mixed
+    # towards the cold start), then multiplicative steps towards the minimum of tr P⁺ over the simplex
+    # (module docstring)
     if warm:
-        w = weights[0]
-        omega[0] = w
-        norm = w
-        omega[0] = (1.0 - SPLIT_CI_WARM_MIX) * w + 0.5 * SPLIT_CI_WARM_MIX
+        # (1 − λ) × the previous weights + λ × (ω_0 = 1/2, the neighbours sharing the other half by Δ)
+        omega[0] = (1.0 - SPLIT_CI_WARM_MIX) * weights[0] + 0.5 * SPLIT_CI_WARM_MIX
         norm = omega[0]
         for q in range(m):
             omega[q + 1] = (1.0 - SPLIT_CI_WARM_MIX) * weights[rows[q] + 1] + 0.5 * SPLIT_CI_WARM_MIX * share[q]
