@@ -1,6 +1,7 @@
 """The update primitives the CEKF's peer updates share (``cekf``, ``peer_ci``, ``split_ci``).
 
-One scalar row of a joint update linearised at the prior, covariance scaling, 3×3 and
+One scalar row of a joint update linearised at the prior, a 3-row position block, tr(A S⁻¹ A),
+covariance scaling, 3×3 and
 symmetric 6×6 inverses, the independent part of a split covariance carried through a row's
 gain (the search constants are in ``constants``). All are inlined into the kernels
 that call them.
@@ -129,3 +130,39 @@ def inv_spd6(A, out, L):
             out[i, j] = L[i, j]
             out[j, i] = L[i, j]
     return True
+
+
+@njit(cache=True, inline="always")
+def tr_asa(P, Si):
+    """tr(A S⁻¹ A) with A = P_pp (symmetric) and Si = S⁻¹."""
+    t = 0.0
+    for u in range(3):
+        for v in range(3):
+            av = 0.0
+            for q in range(3):
+                av += Si[u, q] * P[q, v]
+            t += P[v, u] * av
+    return t
+
+
+@njit(cache=True, inline="always")
+def block_update(x, P, meas, Si, K, top):
+    """A 3-row block with H = [I 0] and S⁻¹ = Si: K = P[:, :3] S⁻¹, x ← x + K (meas − p), P ← P − K P[:3, :].
+
+    K: ``(6, 3)`` output (the gain); top: ``(6, 3)`` scratch.
+    """
+    for a in range(6):
+        for v in range(3):
+            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
+    y0, y1, y2 = meas[0] - x[0], meas[1] - x[1], meas[2] - x[2]
+    for a in range(6):
+        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
+    # P[:3, :]ᵀ = P[:, :3], read from a copy (upper triangle, mirrored)
+    for a in range(6):
+        for v in range(3):
+            top[a, v] = P[a, v]
+    for a in range(6):
+        for b in range(a, 6):
+            v = P[a, b] - (K[a, 0] * top[b, 0] + K[a, 1] * top[b, 1] + K[a, 2] * top[b, 2])
+            P[a, b] = v
+            P[b, a] = v

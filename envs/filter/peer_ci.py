@@ -14,9 +14,11 @@ from numba import njit
 
 from swarmloc.envs.filter.constants import CI_GRID
 from swarmloc.envs.filter.constants import MIN_RANGE as _MIN_RANGE
+from swarmloc.envs.filter.ekf_rows import block_update as _block_update
 from swarmloc.envs.filter.ekf_rows import inv3 as _inv3
 from swarmloc.envs.filter.ekf_rows import scalar_update as _scalar_update
 from swarmloc.envs.filter.ekf_rows import scale_cov as _scale_cov
+from swarmloc.envs.filter.ekf_rows import tr_asa as _tr_asa
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
 from swarmloc.envs.world.cost import CI_RANGE_FLOPS, CI_REL_FLOPS, RANGE_ROW_FLOPS
 
@@ -52,7 +54,7 @@ def _ci_range_row(x, P, hvec, Pj, y, r, c):
 def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
     """A relative position by covariance intersection, m = p̂_j − z a measurement of p_i. Returns ω.
 
-    S, Si: scratch 3×3; K: scratch 6×3; top: scratch 3×6.
+    S, Si: scratch 3×3; K, top: scratch 6×3.
     """
     tr = P[0, 0] + P[1, 1] + P[2, 2]
     best, best_w = tr, 1.0
@@ -63,14 +65,7 @@ def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
                 S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
         _inv3(S, Si)
         # tr(A S⁻¹ A) with A = P_pp (symmetric)
-        t = 0.0
-        for u in range(3):
-            for v in range(3):
-                av = 0.0
-                for q in range(3):
-                    av += Si[u, q] * P[q, v]
-                t += P[v, u] * av
-        f = tr / w - t / (w * w)
+        f = tr / w - _tr_asa(P, Si) / (w * w)
         if f < best:
             best, best_w = f, w
     if best_w >= 1.0:
@@ -81,22 +76,8 @@ def _ci_rel_block(x, P, Pj, m, r, S, Si, K, top):
             S[u, v] = P[u, v] / w + Pj[u, v] / (1.0 - w) + (r if u == v else 0.0)
     _inv3(S, Si)
     _scale_cov(P, 1.0 / w)
-    # K = P[:, :3] S⁻¹ (on the scaled P), y = m − p
-    for a in range(6):
-        for v in range(3):
-            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
-    y0, y1, y2 = m[0] - x[0], m[1] - x[1], m[2] - x[2]
-    for a in range(6):
-        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
-    # P ← P − K P[:3, :] (upper triangle, mirrored; P[:3, :] read from a copy)
-    for u in range(3):
-        for v in range(6):
-            top[u, v] = P[u, v]
-    for a in range(6):
-        for b2 in range(a, 6):
-            v = P[a, b2] - (K[a, 0] * top[0, b2] + K[a, 1] * top[1, b2] + K[a, 2] * top[2, b2])
-            P[a, b2] = v
-            P[b2, a] = v
+    # K = P[:, :3] S⁻¹ (on the scaled P), x ← x + K (m − p), P ← P − K P[:3, :]
+    _block_update(x, P, m, Si, K, top)
     return w
 
 
@@ -105,7 +86,7 @@ def ci_peers(x, P, z, valid, alpha, kind, target, r0, prior_pos, prior_pp, alpha
     """The peer channels of one UAV by covariance intersection, in channel order (after its absolute
     channels; the arguments as ``update_uav``'s). Returns their FLOPs."""
     flops = 0
-    S, Si, K, top = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((3, 6))
+    S, Si, K, top = np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((6, 3))
     for l in range(kind.shape[0]):
         ch = kind[l]
         if not (valid[l] and alpha[l] > alpha_th and (ch == PEER or ch == PEER_REL)):

@@ -89,7 +89,7 @@ from numba import njit
 
 from swarmloc.envs.filter.constants import (MIN_RANGE, OMEGA_FLOOR, SPLIT_CI_DEPENDENT_FLOOR, SPLIT_CI_GRID,
                                             SPLIT_CI_STEPS, SPLIT_CI_WARM_MIX, SPLIT_CI_WARM_STEPS)
-from swarmloc.envs.filter.ekf_rows import inv3, joseph_part, scalar_update
+from swarmloc.envs.filter.ekf_rows import block_update, inv3, joseph_part, scalar_update, tr_asa
 from swarmloc.envs.tasks.channels import PEER, PEER_REL
 from swarmloc.envs.world.cost import (SPLIT_CI_FLOPS, SPLIT_CI_RANGE_FLOPS, SPLIT_CI_REL_FLOPS, SPLIT_CI_WARM_FLOPS,
                                       SPLIT_CI_WARM_RANGE_FLOPS, SPLIT_CI_WARM_REL_FLOPS)
@@ -104,19 +104,6 @@ def row_gain(c, hvec, col, r, k):
         s = c[0] * hvec[0] + c[1] * hvec[1] + c[2] * hvec[2] + r
     for a in range(6):
         k[a] = c[a] / s
-
-
-@njit(cache=True, inline="always")
-def _tr_asa(P, Si):
-    """tr(A S⁻¹ A) with A = P_pp (symmetric) and Si = S⁻¹."""
-    t = 0.0
-    for u in range(3):
-        for v in range(3):
-            av = 0.0
-            for q in range(3):
-                av += Si[u, q] * P[q, v]
-            t += P[v, u] * av
-    return t
 
 
 @njit(cache=True)
@@ -201,7 +188,7 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
                 for v in range(3):
                     S[u, v] = P[u, v] + Pj[u, v] + (rl if u == v else 0.0)
             inv3(S, Si)
-            share[m] = _tr_asa(P, Si)
+            share[m] = tr_asa(P, Si)
             dep += max(Pj[0, 0] - Nj[0, 0] + Pj[1, 1] - Nj[1, 1] + Pj[2, 2] - Nj[2, 2], 0.0)
             flops += SPLIT_CI_WARM_REL_FLOPS if warm else SPLIT_CI_REL_FLOPS
         rows[m] = l
@@ -289,7 +276,7 @@ def split_ci_peers(x, P, N, work, z, valid, alpha, kind, target, r0, prior_pos, 
                     for v in range(3):
                         S[u, v] = P[u, v] + (Pj[u, v] - Nj[u, v]) / om + Nj[u, v] + (r[q] if u == v else 0.0)
                 inv3(S, Si)
-                _block_update(x, P, h[q], Si, K, G)
+                block_update(x, P, h[q], Si, K, G)
                 # N_new through the block: N − K N[:3, :] − N[:, :3] Kᵀ + K (N_pp + r I) Kᵀ
                 _joseph_block(fresh, K, r[q], G, S)
     N[:, :] = fresh
@@ -355,10 +342,7 @@ def _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_
         else:
             # R_j = D_j / ω_j + N_j + r I
             Pj, Nj = prior_pp[target[l]], prior_ind_pp[target[l]]
-            for u in range(3):
-                for v in range(3):
-                    S[u, v] = (Pj[u, v] - Nj[u, v]) / om + Nj[u, v] + (r[q] if u == v else 0.0)
-            inv3(S, Si)
+            _rel_noise_inverse(Pj, Nj, om, r[q], S, Si)
             for u in range(3):
                 for v in range(3):
                     Mm[u, v] += Si[u, v]
@@ -421,10 +405,7 @@ def _fused_trace(P, N, pre, omega, m, rows, kind, target, h, r, a_d, a_n, prior_
             grad[q + 1] = max(uqu * a_d[q], 0.0) / (om * s) ** 2
         else:
             Pj, Nj = prior_pp[target[l]], prior_ind_pp[target[l]]
-            for u in range(3):
-                for v in range(3):
-                    S[u, v] = (Pj[u, v] - Nj[u, v]) / om + Nj[u, v] + (r[q] if u == v else 0.0)
-            inv3(S, Si)
+            _rel_noise_inverse(Pj, Nj, om, r[q], S, Si)
             # S ← D_j, X ← R_j⁻¹ D_j R_j⁻¹
             for u in range(3):
                 for v in range(3):
@@ -481,26 +462,12 @@ def _sandwich(B, M, out, tmp):
 
 
 @njit(cache=True, inline="always")
-def _block_update(x, P, meas, Si, K, top):
-    """A 3-row block with H = [I 0] and S⁻¹ = Si: K = P[:, :3] S⁻¹, x ← x + K (meas − p), P ← P − K P[:3, :].
-
-    K: ``(6, 3)`` output (the gain); top: ``(6, 3)`` scratch.
-    """
-    for a in range(6):
+def _rel_noise_inverse(Pj, Nj, om, r, S, Si):
+    """S = R_j = D_j/ω_j + N_j + r I of a relative-position peer (D_j = P_j − N_j) and Si = R_j⁻¹."""
+    for u in range(3):
         for v in range(3):
-            K[a, v] = P[a, 0] * Si[0, v] + P[a, 1] * Si[1, v] + P[a, 2] * Si[2, v]
-    y0, y1, y2 = meas[0] - x[0], meas[1] - x[1], meas[2] - x[2]
-    for a in range(6):
-        x[a] += K[a, 0] * y0 + K[a, 1] * y1 + K[a, 2] * y2
-    # P[:3, :]ᵀ = P[:, :3], read from a copy (upper triangle, mirrored)
-    for a in range(6):
-        for v in range(3):
-            top[a, v] = P[a, v]
-    for a in range(6):
-        for b in range(a, 6):
-            v = P[a, b] - (K[a, 0] * top[b, 0] + K[a, 1] * top[b, 1] + K[a, 2] * top[b, 2])
-            P[a, b] = v
-            P[b, a] = v
+            S[u, v] = (Pj[u, v] - Nj[u, v]) / om + Nj[u, v] + (r if u == v else 0.0)
+    inv3(S, Si)
 
 
 @njit(cache=True, inline="always")
