@@ -16,11 +16,22 @@ from swarmloc.envs.adapters.gym_env import SwarmLocEnv
 from swarmloc.envs.tasks.docs import task_doc
 from swarmloc.envs.tasks.catalogue import CATALOGUE
 from swarmloc.envs.tasks.v1 import HISTORY_V1
+from swarmloc.envs.tasks.v2 import HISTORY_V2
 
 _V0 = ("v0: initial release (standard reward v0, processor profile stm32f427-cortex-m4f v0).",)
 #: the TDOA tasks start at v1 (they came with the TDOA channel kind, beside the frozen v0 tasks)
 _TDOA_V1 = ("v1: initial release, with the TDOA channel kind (standard reward v0, processor profile "
             "stm32f427-cortex-m4f v0).",)
+
+
+def _history_before_v2(task_id: str) -> tuple[str, ...]:
+    """The v0 and v1 lines of a v2 task whose ID existed before (none for a new task)."""
+    v1 = task_id.replace("-v2", "-v1")
+    if v1 in HISTORY_V1:
+        return (_V0 if task_id.replace("-v2", "-v0") in CATALOGUE else ()) + (HISTORY_V1[v1],)
+    return _TDOA_V1 if v1 == "swarmloc/TDOA-v1" else ()
+
+
 #: Version History of the classes that are not plain v0 releases
 _HISTORY: dict[str, tuple[str, ...]] = {
     "swarmloc/UTILFlight-v1": _V0 + ("v1: the anchors in the Vicon frame (the dataset's conversion of the survey, "
@@ -30,6 +41,8 @@ _HISTORY: dict[str, tuple[str, ...]] = {
     # benchmark v1: a v1 task of a v0 family lists the v0 release first; a new task only its v1 line
     **{task_id: (_V0 if task_id.replace("-v1", "-v0") in CATALOGUE else ()) + (line,)
        for task_id, line in HISTORY_V1.items()},
+    # benchmark v2: the earlier releases of the same ID's family and version, then the v2 line
+    **{task_id: _history_before_v2(task_id) + (line,) for task_id, line in HISTORY_V2.items()},
 }
 
 _SCALE_TEXT = """

@@ -427,3 +427,8 @@ def _merge(base: dict, changes: dict) -> dict:
 from swarmloc.envs.tasks.v1 import CATALOGUE_V1  # noqa: E402
 
 CATALOGUE.update(CATALOGUE_V1)
+
+# the v2 tasks build on the v0 and v1 factories (envs/tasks/v2.py)
+from swarmloc.envs.tasks.v2 import CATALOGUE_V2  # noqa: E402
+
+CATALOGUE.update(CATALOGUE_V2)

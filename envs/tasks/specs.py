@@ -246,6 +246,9 @@ class NlosGaussMarkov(Frozen):
     ``mean_bias_range`` (NLOS excess delays span an order of magnitude), and which of the
     eligible links are NLOS-prone at all (each with probability ``link_fraction``). A
     range left ``None`` keeps the fixed value.
+
+    With ``peer_state="per_link"`` the two directions of a peer link are one NLOS state:
+    their draws are keyed by the unordered pair, so both evolve identically.
     """
 
     targets: tuple[Literal["anchor", "peer"], ...] = ("anchor", "peer")
@@ -266,6 +269,14 @@ class NlosGaussMarkov(Frozen):
         default="jump", description="'jump': an NLOS episode starts at a bias drawn from the stationary law (v0); "
                                     "'ramp': it starts at 0 and the Gauss–Markov process relaxes towards the mean "
                                     "with time constant tau (the path is blocked progressively)")
+    peer_state: Literal["per_channel", "per_link"] = Field(
+        default="per_channel", exclude_if=lambda value: value == "per_channel",
+        description="'per_channel': UAV i ranging j and UAV j ranging i are two channels with independent NLOS "
+                    "states (every v0/v1 task; left out of the spec's canonical JSON at that value); 'per_link': "
+                    "the two directions of a peer link share one state (one exchange, one obstruction): the same "
+                    "NLOS-prone draw, the same onsets and the same bias at every step. Anchor channels are "
+                    "unaffected; ``nodes`` still selects receiving UAVs, so a link with one end outside it is "
+                    "biased in one direction only")
 
     @model_validator(mode="after")
     def _ranges(self) -> "NlosGaussMarkov":
@@ -542,10 +553,22 @@ class TaskSpec(Frozen):
     faults: Faults = Faults()
     filter: FilterSettings = FilterSettings()
     scoring: Scoring = Scoring()
+    track: Literal["cooperative", "robust-ranging"] | None = Field(
+        default=None, exclude_if=lambda value: value is None,
+        description="the board of benchmark v2 the task belongs to: 'cooperative' (a swarm whose peers carry "
+                    "information; the headline) or 'robust-ranging' (one UAV against faulty ranging); every v2 "
+                    "task names one, v0 and v1 tasks none (left out of the spec's canonical JSON then, so their "
+                    "hashes predate it)")
 
     @model_validator(mode="after")
     def _consistent(self) -> "TaskSpec":
         n = self.n_uav
+        if self.version >= 2 and self.track is None:
+            raise ValueError(f"version={self.version}: a v2 task must name its track ('cooperative' or "
+                             "'robust-ranging')")
+        if self.track == "robust-ranging" and n != 1:
+            raise ValueError(f"track='robust-ranging' is the one-UAV board; n_uav={n} (use 1, or track="
+                             "'cooperative')")
         if self.duration < self.dt:
             raise ValueError(f"duration={self.duration} must be >= dt={self.dt}")
         gps = self.sensors.gps_sigma
