@@ -25,7 +25,7 @@ HYBRID_WEIGHTED_SUM, HYBRID_MIXTURE = 0, 1
 
 
 #: schedule fields that describe the task, not an episode (no leading batch axis)
-PER_TASK_FIELDS = ("hybrid_nodes", "packet_loss")
+PER_TASK_FIELDS = ("gm_key", "hybrid_nodes", "packet_loss")
 #: index offset of the per-episode Gauss–Markov draws in the schedule stream (clear of the others)
 GM_DRAWS = 3_000_000
 #: index offsets of the per-episode hybrid-noise ratio, GPS drift and camera outage draws
@@ -55,6 +55,10 @@ class FaultSchedule(NamedTuple):
         gm_mask: ``(B, N, L)`` links subject to Gauss–Markov NLOS; ``gm_param`` ``(B, 7)``
             [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias, ramp onset (1/0)]
             (per episode: a randomized scenario draws them from the seed).
+        gm_key: ``(N, L)`` int64 (per task) the index that keys each channel's Gauss–Markov draws
+            (its NLOS-prone draw, onsets and process noise): ``i·L + l``, except that under
+            ``peer_state="per_link"`` both directions of a peer link take the index of the lower
+            UAV's channel to the higher one, so they evolve as one state (``gm_draw_keys``).
         hybrid_nodes: ``(N,)`` UAVs with hybrid GPS noise; ``hybrid_param`` ``(B, 6)``
             [ratio, t_scale, gauss_sigma, dof_low, dof_high, model] (model
             ``HYBRID_WEIGHTED_SUM`` or ``HYBRID_MIXTURE``; per episode: a randomized
@@ -80,6 +84,7 @@ class FaultSchedule(NamedTuple):
     drift_nodes: np.ndarray
     gm_mask: np.ndarray
     gm_param: np.ndarray
+    gm_key: np.ndarray
     hybrid_nodes: np.ndarray
     hybrid_param: np.ndarray
     packet_loss: float
@@ -115,6 +120,28 @@ def _column(layout: ChannelLayout, i: int, kind: str, index: int) -> int:
     kinds = (ANCHOR,) if kind == "anchor" else (PEER, PEER_REL)
     hits = np.nonzero(np.isin(layout.kind[i], kinds) & (layout.target[i] == index))[0]
     return int(hits[0]) if hits.size else -1
+
+
+def gm_draw_keys(layout: ChannelLayout, per_link: bool) -> np.ndarray:
+    """``(N, L)`` int64 index of each channel's Gauss–Markov draws (``FaultSchedule.gm_key``).
+
+    Args:
+        layout: the task's channel layout.
+        per_link: key both directions of a peer link by the unordered pair: the channel of
+            UAV i to UAV j (i > j) takes the index of UAV j's channel to UAV i, so the two share
+            every draw. False: each channel its own index ``i·L + l``.
+
+    Returns:
+        The index per channel; per channel it is ``i·L + l``, the draws of every v0/v1 task.
+    """
+    n, n_l = layout.kind.shape
+    key = np.arange(n * n_l, dtype=np.int64).reshape(n, n_l)
+    if per_link:
+        for i, l in zip(*np.nonzero(layout.kind == PEER)):
+            j = int(layout.target[i, l])
+            if j < i:
+                key[i, l] = j * n_l + _column(layout, j, "peer", int(i))
+    return key
 
 
 def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> FaultSchedule:
@@ -218,6 +245,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
 
     gm_mask = np.zeros((n_b, n, n_l), dtype=np.bool_)
     gm_param = np.zeros((n_b, 7))
+    per_link = f.nlos_gauss_markov is not None and f.nlos_gauss_markov.peer_state == "per_link"
+    gm_key = gm_draw_keys(layout, per_link)
     if f.nlos_gauss_markov is not None:
         g = f.nlos_gauss_markov
         kinds = [ANCHOR, TDOA] * ("anchor" in g.targets) + [PEER] * ("peer" in g.targets)
@@ -234,7 +263,8 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
                 lo, hi = g.mean_bias_range
                 gm_param[b, 2] = lo * (hi / lo) ** draw(1)
             if g.link_fraction < 1.0:
-                prone = np.array([[draw(2 + i * n_l + l) < g.link_fraction for l in range(n_l)] for i in range(n)])
+                prone = np.array([[draw(2 + int(gm_key[i, l])) < g.link_fraction for l in range(n_l)]
+                                  for i in range(n)])
                 gm_mask[b] = eligible & prone
 
     hybrid_nodes = np.zeros(n, dtype=np.bool_)
@@ -271,6 +301,7 @@ def build_schedule(spec: TaskSpec, layout: ChannelLayout, seeds: np.ndarray) -> 
         drift_nodes=stack(drift_rows, 2, (n,), np.bool_),
         gm_mask=np.ascontiguousarray(gm_mask),
         gm_param=gm_param,
+        gm_key=gm_key,
         hybrid_nodes=hybrid_nodes,
         hybrid_param=hybrid_param,
         packet_loss=float(f.packet_loss),

@@ -192,7 +192,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     imu_time, imu_bias, imu_nodes, imu_drop = fs.imu_time, fs.imu_bias, fs.imu_nodes, fs.imu_drop
     outage_time, outage_nodes, uwb_time, uwb_mask = fs.outage_time, fs.outage_nodes, fs.uwb_time, fs.uwb_mask
     drift_time, drift_rate, drift_nodes = fs.drift_time, fs.drift_rate, fs.drift_nodes
-    gm_mask, hybrid_nodes = fs.gm_mask, fs.hybrid_nodes
+    gm_mask, gm_key, hybrid_nodes = fs.gm_mask, fs.gm_key, fs.hybrid_nodes
     landmark_offset = fs.landmark_offset
     gm_params = fs.gm_param  # (B, 7) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias, ramp]
     hybrid_params = fs.hybrid_param  # (B, 6) [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
@@ -290,21 +290,23 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                                 err += lo_b * min(1.0, (t - bias_time[b, wi, 0]) / hi_b)
                             else:
                                 err += lo_b
-                    # Gauss–Markov NLOS episodes
+                    # Gauss–Markov NLOS episodes; the draws are keyed by gm_key (i·L + l, or the peer
+                    # pair's shared index under per_link, so both directions evolve as one state)
                     if gm_mask[b, i, l]:
+                        gk = gm_key[i, l]
                         if gm_left[b, i, l] <= 0.0:
                             gm_bias[b, i, l] = 0.0
-                            if uniform_at(key_onset, 2 * idx) < p_on:
-                                u = uniform_at(key_onset, 2 * idx + 1)
+                            if uniform_at(key_onset, 2 * gk) < p_on:
+                                u = uniform_at(key_onset, 2 * gk + 1)
                                 gm_left[b, i, l] = max(1.0, -g[1] * math.log(u) / w.dt)
                                 if g[6] > 0.0:  # ramp onset: from zero bias, relaxing towards the mean
                                     gm_bias[b, i, l] = 0.0
                                 else:
-                                    bb = g[2] + g[3] * normal_at(key_process, idx)
+                                    bb = g[2] + g[3] * normal_at(key_process, gk)
                                     gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
                         else:
                             # b ← μ + φ(b − μ) + σ√(1−φ²)·n
-                            bb = g[2] + phi * (gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, idx)
+                            bb = g[2] + phi * (gm_bias[b, i, l] - g[2]) + gm_step_sigma * normal_at(key_process, gk)
                             gm_bias[b, i, l] = min(max(bb, 0.0), g[5])
                             gm_left[b, i, l] -= 1.0
                         if gm_left[b, i, l] > 0.0:
