@@ -83,7 +83,8 @@ def run(opts: Options) -> int:
     except KeyboardInterrupt:
         console.print(f"[yellow]interrupted[/yellow]: outstanding jobs cancelled, {opts.out} not written")
         return 130
-    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates))
+    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates),
+                        suite=results.suite.name)
     for task, per_metric in results.aggregates.items():
         rmse, bound = per_metric["rmse"], per_metric["bound_rmse"]
         if rmse is None or score is None or task not in score.tasks:

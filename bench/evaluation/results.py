@@ -229,7 +229,8 @@ class ScoreBlock(BaseModel):
     """The score of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
 
     Attributes:
-        S, ci_low, ci_high: the suite score and its stratified-bootstrap 95 % CI.
+        S, ci_low, ci_high: the suite score and its 95 % CI (score v1: stratified bootstrap;
+            score v2, for a v2 suite: family-weighted, hierarchical bootstrap).
         times: ``2^S``.
         iqm: interquartile mean of the covered episodes' gains.
         gap_closed: mean over tasks of their gap closed (null if no task has one).
@@ -250,11 +251,14 @@ class ScoreBlock(BaseModel):
     tasks: dict[str, TaskScoreBlock]
 
 
-def score_block(episodes: Sequence[Episode], tasks: Sequence[str]) -> ScoreBlock | None:
-    """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file)."""
+def score_block(episodes: Sequence[Episode], tasks: Sequence[str], suite: str | None = None) -> ScoreBlock | None:
+    """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file).
+
+    ``suite`` (the suite's name) picks score v1 or v2 (``swarmloc.bench.scoring.score.score_version``).
+    """
     from swarmloc.bench.scoring.score import suite_score  # local: score imports stats, stats this module
 
-    s = suite_score([e.model_dump() for e in episodes], list(tasks))
+    s = suite_score([e.model_dump() for e in episodes], list(tasks), suite=suite)
     if s is None:
         return None
     k, n = s.coverage
@@ -378,7 +382,7 @@ def make_results(
         provenance=provenance or collect_provenance(),
         episodes=parsed,
         aggregates=aggregates,
-        score=score_block(parsed, list(aggregates)),
+        score=score_block(parsed, list(aggregates), suite.name),
     )
 
 

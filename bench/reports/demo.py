@@ -59,7 +59,8 @@ def _mean(results: Results, metric: str) -> float | None:
 
 def summarize_results(results: Results, cpu_s: float | None = None) -> SummaryRow:
     """The summary line of one results file (``cpu_s``: the method's CPU time, if measured)."""
-    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates))
+    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates),
+                        suite=results.suite.name)
     energy = _mean(results, "energy_j")
     k, n = score.coverage if score is not None else (0, len(results.aggregates))
     return SummaryRow(

@@ -6,8 +6,10 @@ files ran the same (task, seed) episodes, so the comparison is paired: per episo
 difference of the gains over uniform (the score, ``docs/scoring.md``), which is
 ``log2(RMSE_A / RMSE_B)`` — uniform's RMSE cancels. Per task the mean difference with its
 paired bootstrap CI; over the suite ``S_B − S_A`` with the CI the leaderboard ranks by
-(:func:`swarmloc.bench.scoring.score.paired_difference`), and rliable's probability of
-improvement ``P(B > A)``.
+(:func:`swarmloc.bench.scoring.score.paired_difference`: score v1's stratified bootstrap, or score
+v2's hierarchical one for a v2 suite), and rliable's probability of improvement ``P(B > A)``.
+Under score v2 the difference in cooperation gain is the same number (non-cooperative's RMSE
+cancels as uniform's does), so one verdict serves both.
 
 Both files ran one suite, or part of it (``--tasks``: ``<suite>-subset``). Only episodes
 both files hold are compared, and only tasks both methods cover (a null RMSE
@@ -153,7 +155,8 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
     names = list(seeds_of)
     if not names:
         raise ValueError(f"{a.method.name!r} and {b.method.name!r} share no covered task; left out: {left_out}")
-    score_a, score_b = suite_score(kept_a, names), suite_score(kept_b, names)
+    # the suite picks the score (score.score_version): a v2 suite's verdict resamples families, then seeds
+    score_a, score_b = (suite_score(kept, names, suite=_base_suite(a.suite.name)) for kept in (kept_a, kept_b))
     assert score_a is not None and score_b is not None  # every kept task is covered by both
     suite_diff, task_diffs = paired_difference(score_a, score_b, n_resamples, seed)
     tasks = []

@@ -22,8 +22,8 @@ performance profiles and the probability of improvement (Agarwal et al. 2021, rl
 A method that cannot run a task (null RMSE on any of its seeds) has no ``G_t`` there: its
 coverage is k/T, and it is compared only on the tasks it covers.
 
-**Score v2** (benchmark v2, ``docs/design``): the same g and ``G_t`` on the v2 backbone, but each
-task *family* (:func:`~swarmloc.bench.scoring.families.task_family`) weighs the same:
+**Score v2** (benchmark v2; ``docs/scoring.md``, "Score v2"): the same g and ``G_t`` on the v2
+backbone, but each task *family* (:func:`~swarmloc.bench.scoring.families.task_family`) weighs the same:
 ``S = mean_f mean_{t ∈ f} G_t`` over the families with a covered task, and the CI is the
 hierarchical bootstrap (families, then seeds within their tasks;
 :func:`~swarmloc.bench.scoring.bootstrap.hierarchical_means`). Beside it the **cooperation

@@ -27,6 +27,13 @@ which is what ``uniform_rmse`` records. Nothing is estimated: an episode with no
 stays without a gain, and the count of filled episodes is kept (``Standing.filled``) and
 shown by the views. This is valid while the stored results come from one simulator
 version, as the suite hash (task specs) guarantees for a suite version.
+
+**Score v2.** A v2 suite (name ending ``-v2``) is scored and ranked by score v2
+(:func:`swarmloc.bench.scoring.score.score_version`): families weigh equally and the CIs and
+separable ranks come from the hierarchical bootstrap. Its cooperation gain needs
+``non-cooperative``'s RMSE per episode, which results files do not carry: it is taken, the way
+the uniform fallback is, from the suite's ``non-cooperative`` entry (same preference), and is
+None on a board without one.
 """
 
 from __future__ import annotations
@@ -40,13 +47,16 @@ import numpy as np
 
 from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE
 from swarmloc.bench.scoring.families import group_by_family, short_task, task_label
-from swarmloc.bench.scoring.score import SuiteScore, separable_ranks, suite_score
+from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, separable_ranks, suite_score
 from swarmloc.leaderboard.store.database import LeaderboardEntry
 
 SuiteKey = tuple[str, str]
 
 #: entry point of the reference whose RMSE fills a missing ``uniform_rmse``
 UNIFORM_ENTRY_POINT = "uniform"
+
+#: entry point of the reference of score v2's cooperation gain
+NON_COOPERATIVE_ENTRY_POINT = "non-cooperative"
 
 
 @dataclass(frozen=True)
@@ -128,9 +138,11 @@ def episodes_of(entry: LeaderboardEntry) -> list[dict[str, Any]]:
     return json.loads(entry.results_json)["episodes"]
 
 
-def reference_entry(entries: Iterable[LeaderboardEntry]) -> LeaderboardEntry | None:
-    """The suite's ``uniform`` entry: trusted before verified before older; None if absent."""
-    candidates = [e for e in entries if e.entry_point == UNIFORM_ENTRY_POINT and not e.privileged]
+def reference_entry(entries: Iterable[LeaderboardEntry],
+                    entry_point: str = UNIFORM_ENTRY_POINT) -> LeaderboardEntry | None:
+    """The suite's ``uniform`` entry (or that of another reference's entry point): trusted before verified
+    before older; None if absent."""
+    candidates = [e for e in entries if e.entry_point == entry_point and not e.privileged]
     if not candidates:
         return None
     return min(candidates, key=lambda e: (not e.trusted, not e.verified, e.created_utc, e.id or 0))
@@ -178,11 +190,14 @@ def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry]) ->
     reference = reference_entry(entries)
     uniform: dict[tuple[str, int], float | None] = {}
     if reference is not None:
-        uniform = {(ep["task"], int(ep["seed"])): ep["metrics"].get("rmse") for ep in episodes[id(reference)]}
+        uniform = rmse_by_episode(episodes[id(reference)])
+    alone = reference_entry(entries, NON_COOPERATIVE_ENTRY_POINT)
+    non_cooperative = None if alone is None else rmse_by_episode(episodes[id(alone)])
     standings = []
     for entry in entries:
         filled_episodes, filled = fill_uniform_rmse(episodes[id(entry)], uniform)
-        standings.append(Standing(entry, suite_score(filled_episodes, tasks), None, filled))
+        score = suite_score(filled_episodes, tasks, suite=name, non_cooperative=non_cooperative)
+        standings.append(Standing(entry, score, None, filled))
     standings.sort(key=_order_key)
     public = [s for s in standings if not s.entry.privileged]
     full = [s for s in public if s.full]

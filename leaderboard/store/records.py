@@ -118,8 +118,9 @@ class EntryScore:
     ``uniform_rmse`` from the suite's ``uniform`` entry; here only the file's episodes count.
 
     Attributes:
-        S: mean over the covered tasks of the mean gain log2(RMSE_uniform / RMSE) (log2 units).
-        ci_low, ci_high: its stratified-bootstrap 95 % CI.
+        S: the suite score of the mean gains log2(RMSE_uniform / RMSE) (log2 units): mean over the
+            covered tasks (score v1), or over families of their tasks' (score v2, v2 suites).
+        ci_low, ci_high: its 95 % CI (stratified bootstrap; hierarchical under score v2).
         iqm: interquartile mean of the covered episodes' gains.
     """
 
@@ -139,12 +140,13 @@ class EntryScore:
         return 2.0**self.ci_low, 2.0**self.ci_high
 
     @classmethod
-    def of(cls, episodes: Iterable[Mapping[str, Any]]) -> EntryScore | None:
+    def of(cls, episodes: Iterable[Mapping[str, Any]], suite: str | None = None) -> EntryScore | None:
         """The score of results-file episodes (``{"task", "seed", "metrics"}``; tasks in the order they
-        appear); None when no task has a gain (no ``uniform_rmse``, or no episode the method ran)."""
+        appear) on the named suite (it picks score v1 or v2; None: v1); None when no task has a gain
+        (no ``uniform_rmse``, or no episode the method ran)."""
         from swarmloc.bench.scoring.score import suite_score  # local: numpy, only when scoring
 
-        s = suite_score(episodes)
+        s = suite_score(episodes, suite=suite)
         return None if s is None else cls(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, iqm=s.iqm)
 
 

@@ -289,7 +289,7 @@ def score_problems(results: Results) -> list[str]:
     """A ``score`` block that disagrees with the episodes (the leaderboard recomputes it anyway)."""
     if results.score is None:
         return []
-    expected = score_block(results.episodes, list(results.aggregates))
+    expected = score_block(results.episodes, list(results.aggregates), results.suite.name)
     if expected is None:
         return ["the results file has a score block, but its episodes give none (no uniform_rmse)"]
     problems = []

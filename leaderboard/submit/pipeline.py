@@ -113,7 +113,7 @@ def build_entry(
         trusted=trusted,
         verification_seed=None if report is None else report.sample_seed,
         verified_episodes=0 if report is None else len(report.episodes),
-        score=EntryScore.of(e.model_dump() for e in results.episodes),
+        score=EntryScore.of((e.model_dump() for e in results.episodes), suite=results.suite.name),
         delay_ms=_mean_metric(validated, "delay_ms"),
         energy_j=_mean_metric(validated, "energy_j"),
         jitter=_mean_metric(validated, "jitter"),
