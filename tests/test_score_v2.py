@@ -243,8 +243,10 @@ def test_tasks_split_by_track_headline_first_v1_last() -> None:
         tracks.tasks_by_track([SCALE8], lambda task: "headline")
 
 
-def test_a_registered_v1_task_has_no_track() -> None:
+def test_registered_tasks_name_their_track_v1_none() -> None:
     assert tracks.task_track("swarmloc/Scale8-v1") is None
+    assert tracks.task_track("swarmloc/Scale8-v2") == "cooperative"
+    assert tracks.task_track("swarmloc/AnchorNLOS-v2") == "robust-ranging"
 
 
 def test_one_score_per_track() -> None:
