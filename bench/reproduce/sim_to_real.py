@@ -43,8 +43,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from swarmloc.bench.evaluation.suites import DEV_SEED_START, RESERVED_SEED_START, get_suite
 from swarmloc.bench.reports.markdown import markdown_table
-from swarmloc.bench.scoring.bootstrap import (DEFAULT_CONFIDENCE, DEFAULT_RESAMPLES, DEFAULT_SEED,
-                                              hierarchical_means, percentile_interval)
+from swarmloc.bench.scoring.bootstrap import (
+    DEFAULT_CONFIDENCE,
+    DEFAULT_RESAMPLES,
+    DEFAULT_SEED,
+    hierarchical_means,
+    percentile_interval,
+)
 from swarmloc.bench.scoring.families import task_label
 from swarmloc.bench.scoring.score import episode_gain
 from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
@@ -326,7 +331,7 @@ def render_sim_to_real(doc: Mapping[str, Any]) -> list[str]:
     rank = {s: {m: k + 1 for k, m in enumerate(doc[s]["ranking"])} for s in ("sim", "real")}
     rows = [[f"`{m}`", str(rank["sim"][m]), f"{sim['scores'][m]:+.3f}", str(rank["real"][m]),
              f"{real['scores'][m]:+.3f}"] for m in doc["sim"]["ranking"]]
-    lows, highs = doc["ci"]
+    low, high = doc["ci"]
     seeds = doc.get("seed_lists", {})
 
     def episodes(side: str) -> str:
@@ -336,14 +341,13 @@ def render_sim_to_real(doc: Mapping[str, Any]) -> list[str]:
             f"{sorted(set(doc[side]['seeds'].values()))} seeds each"
         return f"{len(doc[side]['tasks'])} task(s) ({tasks}), {per}"
 
-    lines = ["## Sim-to-real rank agreement (robust-ranging track)", "",
-             f"Kendall τ-b between the two rankings: **{doc['tau']:+.2f}** "
-             f"({doc['confidence']:.0%} bootstrap CI [{lows:+.2f}, {highs:+.2f}], {doc['n_resamples']} resamples of "
-             "tasks and seeds on both sides, seed "
-             f"{doc['seed']}{'; ' + str(doc['undefined_resamples']) + ' with τ undefined left out' if doc['undefined_resamples'] else ''}).",
-             "",
-             "Score: mean log2(RMSE_uniform / RMSE) over a task's seeds, then over the tasks (each the same "
-             "weight); rank 1 is best.", "",
+    undefined = doc["undefined_resamples"]
+    tau = (f"Kendall τ-b between the two rankings: **{doc['tau']:+.2f}** ({doc['confidence']:.0%} bootstrap CI "
+           f"[{low:+.2f}, {high:+.2f}]; {doc['n_resamples']} resamples of tasks and seeds on both sides, seed "
+           f"{doc['seed']}" + (f"; {undefined} with τ undefined left out" if undefined else "") + ").")
+    score = ("Score: mean log2(RMSE_uniform / RMSE) over a task's seeds, then over the tasks (each the same weight); "
+             "rank 1 is best.")
+    lines = ["## Sim-to-real rank agreement (robust-ranging track)", "", tau, "", score, "",
              f"- simulated: {episodes('sim')} (dev seeds only);",
              f"- real: {episodes('real')} (every seed replays the same recording).", ""]
     if doc.get("overrides"):
