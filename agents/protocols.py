@@ -101,6 +101,8 @@ class TaskFacts:
             broadcast covariance (``TaskSpec.peer_nis_neighbour_cov``: v1 tasks).
         imu_bias_sigma: std of the constant per-episode accelerometer bias the world draws per UAV
             and axis [m/s²] (``Sensors.imu_bias_sigma``; 0: none).
+        imu_faults: the task injects IMU faults (``faults.imu_cascades`` or ``imu_cascade_random``);
+            which UAVs and when is privileged (``PrivilegedInfo.imu_fault_variance``).
         peer_update: the task's CEKF peer update (``FilterSettings.peer_update``: ``"point"``,
             ``"ci"`` or ``"split_ci"``), for an estimator that runs the task's backbone.
     """
@@ -126,6 +128,7 @@ class TaskFacts:
     velocity_sigma: float | None = None
     peer_nis_neighbour_cov: bool = False
     imu_bias_sigma: float = 0.0
+    imu_faults: bool = False
     peer_update: str = "point"
 
     @property
@@ -182,6 +185,7 @@ class TaskFacts:
             keys=_frozen_array(np.array(keys, dtype=np.int64)),
             velocity_sigma=None if spec.sensors.velocity_sigma is None else float(spec.sensors.velocity_sigma),
             peer_nis_neighbour_cov=bool(spec.peer_nis_neighbour_cov), imu_bias_sigma=float(spec.sensors.imu_bias_sigma),
+            imu_faults=bool(spec.faults.imu_cascades or spec.faults.imu_cascade_random is not None),
             peer_update=spec.filter.peer_update,
         )
 
@@ -288,11 +292,16 @@ class PrivilegedInfo:
             error only (an estimator's estimates are its own). None where not provided.
         systematic_sigmas: ``(B, N, L)`` the systematic error in units of σ_eff behind
             ``error_labels`` (Track A only; None otherwise), for oracles at another k.
+        imu_fault_variance: ``(B, N)`` per UAV, σ_f² = ‖β‖²/3 of the IMU-fault bias β acting on
+            the coming step's accelerometer reading, 0 outside a fault window
+            (``envs.filter.bound.fault_variance``: what the information bound knows); Track B, on
+            tasks with IMU faults; None otherwise.
     """
 
     labels: np.ndarray
     error_labels: np.ndarray | None = None
     systematic_sigmas: np.ndarray | None = None
+    imu_fault_variance: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------- protocols

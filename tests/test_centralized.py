@@ -222,3 +222,54 @@ def test_registered_privileged_track_b_and_run_by_the_runner():
                             references=False)
     rmse = [m["rmse"] for m in outcome.episodes["centralized-oracle"]]
     assert all(np.isfinite(r) and r < 1.0 for r in rmse), rmse
+
+
+def _facts(spec, seeds):
+    world = World(spec, len(seeds))
+    x0 = world.reset(seeds).copy()
+    return world, TaskFacts.from_spec(spec, world.layout, x0, episode_keys(seeds))
+
+
+def test_an_imu_fault_window_adds_the_constant_offsets_position_variance_in_closed_form():
+    # one UAV, no channel used: inside a window with σ_f² the position variance grows by σ_f² (t²/2)² per axis
+    # beyond dead reckoning's (u = a + β: p(t) is off by β t²/2), and the offset is forgotten when it closes
+    spec = get_spec("swarmloc/CascadedFault-v2", n_uav=1, duration=3.0, scoring={"nodes": [], "healthy_nodes": [],
+                                                                                  "fault_window": None},
+                    faults={"imu_cascades": [{"nodes": [0], "start": 1.0, "end": 2.0}]})
+    world, facts = _facts(spec, DEV[:1])
+    assert facts.imu_faults
+    with_fault, without = CentralizedOracle(), CentralizedOracle()
+    with_fault.reset(facts, facts.x0)
+    without.reset(facts, facts.x0)
+    var = 0.7
+    for k in range(spec.n_steps):
+        buf = world.sense()
+        meas = Measurements.capture(buf.imu, buf.z, buf.valid, (k + 1) * spec.dt, k + 1)
+        none = np.ones_like(buf.valid)
+        t = (k + 1) * spec.dt
+        inside = 1.0 - 1e-9 <= t < 2.0 - 1e-9
+        with_fault.observe_privileged(PrivilegedInfo(labels=none, error_labels=none,
+                                                     imu_fault_variance=np.full((1, 1), var if inside else 0.0)))
+        without.observe_privileged(PrivilegedInfo(labels=none, error_labels=none,
+                                                   imu_fault_variance=np.zeros((1, 1))))
+        a, b = with_fault.step(meas), without.step(meas)
+        if inside:
+            n = round((t - 1.0) / spec.dt) + 1  # predictions since the window opened
+            expected = var * (n * spec.dt) ** 4 / 4.0
+            np.testing.assert_allclose(a.cov[0, 0] - b.cov[0, 0], expected * np.eye(3), rtol=1e-9, atol=1e-12)
+    # closed: the offset is 0 and certain again (the position keeps what it drifted)
+    idx = with_fault.fault_block * 3 + np.arange(3)
+    assert np.all(with_fault.x[0, 0, 6:9] == 0.0) and np.all(with_fault.P[0, idx, :] == 0.0)
+
+
+def test_it_refuses_a_task_with_imu_faults_without_their_variance():
+    spec = get_spec("swarmloc/CascadedFault-v2", duration=1.0)
+    world, facts = _facts(spec, DEV[:1])
+    est = CentralizedOracle()
+    est.reset(facts, facts.x0)
+    buf = world.sense()
+    with pytest.raises(ValueError, match="imu_fault_variance"):
+        est.observe_privileged(PrivilegedInfo(labels=buf.label, error_labels=buf.error_label))
+    with pytest.raises(ValueError, match=r"shape \(B, N\) = \(1, 4\)"):
+        est.observe_privileged(PrivilegedInfo(labels=buf.label, error_labels=buf.error_label,
+                                              imu_fault_variance=np.zeros((1, 3))))

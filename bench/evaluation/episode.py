@@ -41,6 +41,7 @@ from swarmloc.agents.protocols import (
 from swarmloc.agents.registry import LoadedMethod
 from swarmloc.envs.adapters.trust_env import TrustEnvBatch
 from swarmloc.envs.tasks.channels import ChannelLayout
+from swarmloc.envs.filter.bound import fault_variance
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.world.reward import RewardTerms
 from swarmloc.envs.world.sim import validate_seeds
@@ -301,13 +302,18 @@ def _fly_estimator(loaded: LoadedMethod, spec: TaskSpec, seeds: np.ndarray,
     shape = (n_b, spec.n_uav, world.layout.n_channels)
     rec = StepRecord()
     previous: np.ndarray | None = None
+    # the IMU-fault windows as the information bound knows them (privileged: which UAV, when, how large)
+    fault = None
+    if loaded.privileged and facts.imu_faults and getattr(world, "schedule", None) is not None:
+        fault = fault_variance(world.schedule, spec.dt, spec.n_steps, spec.n_uav)
     for k in range(spec.n_steps):
         buf = world.sense()
         t = (k + 1) * spec.dt
         meas = Measurements.capture(buf.imu, buf.z, buf.valid, t, k + 1, getattr(buf, "velocity", None))
         if loaded.privileged:
             est.observe_privileged(PrivilegedInfo(labels=_readonly(buf.label.copy()),
-                                                  error_labels=_readonly(buf.error_label.copy())))
+                                                  error_labels=_readonly(buf.error_label.copy()),
+                                                  imu_fault_variance=None if fault is None else _readonly(fault[k])))
         started = time.perf_counter()
         answer = est.step(meas)
         rec.method_s = time.perf_counter() - started
