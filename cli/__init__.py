@@ -67,6 +67,7 @@ COMMANDS: CommandTable = {
         "federated": "swarmloc.cli.reproduce:Federated",
         "dtvirm": "swarmloc.cli.reproduce:Dtvirm",
         "real": "swarmloc.cli.reproduce:Real",
+        "nlos-fit": "swarmloc.cli.reproduce:NlosFit",
         "labels": "swarmloc.cli.reproduce:Labels",
         "calibration": "swarmloc.cli.reproduce:Calibration",
         "peer-update": "swarmloc.cli.reproduce:PeerUpdate",

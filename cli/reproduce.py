@@ -155,6 +155,23 @@ class Real:
 
 
 @dataclass
+class NlosFit:
+    """The Gauss–Markov NLOS process fitted to the UTIL residual statistics (TWR and TDOA obstacle flights):
+    share of biased samples, their magnitudes, biased-run durations and autocorrelation, real beside simulated."""
+
+    out: Path = Path("nlos-fit.md")
+    """Markdown file to write (a folder: <out>/nlos-fit.md); the numbers go beside it as .json."""
+    max_evaluations: int = 300
+    """Objective evaluations of the Nelder–Mead fit per data set (each simulates every flight once)."""
+
+    def run(self) -> int:
+        """Without the data, says where it comes from (exit status 2)."""
+        from swarmloc.bench.reproduce.nlos_fit import reproduce_nlos_fit
+
+        return print_report(lambda: reproduce_nlos_fit(self.out, max_evaluations=self.max_evaluations))
+
+
+@dataclass
 class Labels:
     """Calibrate the error labels: the oracle at k = 1 … 3 on every standard-v0 task, beside the best
     shipped method and the information bound."""
