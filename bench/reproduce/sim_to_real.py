@@ -334,11 +334,11 @@ def render_sim_to_real(doc: Mapping[str, Any]) -> list[str]:
     low, high = doc["ci"]
     seeds = doc.get("seed_lists", {})
 
-    def episodes(side: str) -> str:
+    def episodes(side: str, note: str) -> str:
         tasks = ", ".join(f"`{task_label(t)}`" for t in doc[side]["tasks"])
         got = seeds.get(side)
-        per = f"seeds {got[0]} … {got[-1]} ({len(got)} each)" if got else \
-            f"{sorted(set(doc[side]['seeds'].values()))} seeds each"
+        per = f"seeds {got[0]} … {got[-1]} ({len(got)} each; {note})" if got else \
+            f"{'/'.join(map(str, sorted(set(doc[side]['seeds'].values()))))} seeds each ({note})"
         return f"{len(doc[side]['tasks'])} task(s) ({tasks}), {per}"
 
     undefined = doc["undefined_resamples"]
@@ -348,8 +348,8 @@ def render_sim_to_real(doc: Mapping[str, Any]) -> list[str]:
     score = ("Score: mean log2(RMSE_uniform / RMSE) over a task's seeds, then over the tasks (each the same weight); "
              "rank 1 is best.")
     lines = ["## Sim-to-real rank agreement (robust-ranging track)", "", tau, "", score, "",
-             f"- simulated: {episodes('sim')} (dev seeds only);",
-             f"- real: {episodes('real')} (every seed replays the same recording).", ""]
+             f"- simulated: {episodes('sim', 'dev seeds only')};",
+             f"- real: {episodes('real', 'every seed replays the same recording')}.", ""]
     if doc.get("overrides"):
         lines += [f"Shortened or changed episodes ({doc['overrides']}): not the measurement.", ""]
     lines += markdown_table(["method", "sim rank", "sim score", "real rank", "real score"], rows, "lrrrr")
