@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from swarmloc.bench.scoring import score as S
+from swarmloc.bench.scoring import profiles as P
 def _ep(task, seed, rmse, uniform, bound=None):
     return {"task": task, "seed": seed, "metrics": {"rmse": rmse, "uniform_rmse": uniform, "bound_rmse": bound}}
 
@@ -73,17 +74,17 @@ def test_gap_closed_of_the_suite_is_the_ratio_of_sums_over_tasks_with_a_gap():
 def test_performance_profile_by_hand():
     gains = {"A": np.array([-1.0, 0.5, 2.0, 3.0]), "B": np.array([0.0, 1.0])}
     # τ = 0: A 3/4, B 1/2 → 0.625; τ = 1: A 2/4, B 0 → 0.25; τ = −2: everything
-    np.testing.assert_allclose(S.performance_profile(gains, [-2.0, 0.0, 1.0]), [1.0, 0.625, 0.25])
+    np.testing.assert_allclose(P.performance_profile(gains, [-2.0, 0.0, 1.0]), [1.0, 0.625, 0.25])
 
 
 def test_probability_of_improvement_by_hand():
     x = {"A": np.array([1.0, 3.0]), "B": np.array([0.0])}
     y = {"A": np.array([2.0, 2.0]), "B": np.array([0.0]), "C": np.array([5.0])}
     # A: pairs (1>2? 0)(1>2? 0)(3>2 1)(3>2 1) → 0.5; B: a tie → 0.5; C is not shared
-    assert S.probability_of_improvement(x, y) == 0.5
-    assert S.probability_of_improvement({"A": np.array([3.0])}, {"A": np.zeros(4)}) == 1.0
+    assert P.probability_of_improvement(x, y) == 0.5
+    assert P.probability_of_improvement({"A": np.array([3.0])}, {"A": np.zeros(4)}) == 1.0
     with pytest.raises(ValueError, match="share no task"):
-        S.probability_of_improvement({"A": np.ones(1)}, {"B": np.ones(1)})
+        P.probability_of_improvement({"A": np.ones(1)}, {"B": np.ones(1)})
 
 
 def _suite(gains_by_task: dict[str, list[float]], seeds: list[int] | None = None) -> S.SuiteScore:

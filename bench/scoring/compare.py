@@ -26,11 +26,11 @@ import numpy as np
 
 from swarmloc.bench.evaluation.results import Results
 from swarmloc.bench.scoring.bootstrap import DEFAULT_RESAMPLES, DEFAULT_SEED
+from swarmloc.bench.scoring.profiles import probability_of_improvement
 from swarmloc.bench.scoring.score import (
     PairedDifference,
     SuiteScore,
     paired_difference,
-    probability_of_improvement,
     suite_score,
 )
 

@@ -15,9 +15,9 @@ not the −50 that a score normalized by the gap to an oracle gave it (benchmark
 Beside it, the information bound (``bound_rmse``, the posterior Cramér–Rao bound of the
 episode) gives each task an **achievable** gain ``A_t = mean log2(RMSE_uniform / bound)``
 and a **gap closed** ``G_t / A_t``, defined where ``A_t ≥ log2 1.25`` (a task where even
-the bound is within 25 % of uniform has no gap worth a ratio). Also here: the IQM of g,
-performance profiles and the probability of improvement (Agarwal et al. 2021, rliable;
-``docs/references.md`` [rliable]).
+the bound is within 25 % of uniform has no gap worth a ratio). Also here: the IQM of g
+(Agarwal et al. 2021, rliable; ``docs/references.md`` [rliable]); rliable's performance profiles
+and probability of improvement are in :mod:`swarmloc.bench.scoring.profiles`.
 
 A method that cannot run a task (null RMSE on any of its seeds) has no ``G_t`` there: its
 coverage is k/T, and it is compared only on the tasks it covers.
@@ -228,15 +228,24 @@ def _families(version: int, tasks: Iterable[str]) -> dict[str, tuple[str, ...]]:
     return {} if version == 1 else {f: tuple(ts) for f, ts in group_by_family(tasks).items()}
 
 
-def _suite_statistic(families: Mapping[str, Sequence[str]], task_means: Mapping[str, float]) -> float:
-    """S from the task means: their mean (no families, v1) or the mean over families of the family means (v2)."""
+def suite_statistic(families: Mapping[str, Sequence[str]], task_values: Mapping[str, float | np.ndarray]) -> np.ndarray:
+    """S from per-task values: their mean (no families, v1) or the mean over families of the family means (v2).
+
+    Args:
+        families: family → its tasks (score v2), or empty (score v1: tasks weigh equally).
+        task_values: task → a number (``G_t``) or an array of one shape for every task (a profile
+            over thresholds): the statistic is taken elementwise.
+
+    Returns:
+        The statistic, of the values' shape (0-d for numbers).
+    """
     if not families:
-        return float(np.mean(list(task_means.values())))
-    return float(np.mean([np.mean([task_means[t] for t in tasks]) for tasks in families.values()]))
+        return np.mean(list(task_values.values()), axis=0)
+    return np.mean([np.mean([task_values[t] for t in tasks], axis=0) for tasks in families.values()], axis=0)
 
 
-def _resampled_suite(families: Mapping[str, Sequence[str]], values: Mapping[str, np.ndarray], n_resamples: int,
-                     seed: int) -> np.ndarray:
+def resampled_suite(families: Mapping[str, Sequence[str]], values: Mapping[str, np.ndarray], n_resamples: int,
+                    seed: int) -> np.ndarray:
     """``(..., R)``: S of every resample of the per-task ``(..., n_t)`` values (rows of methods stay paired).
 
     No families (score v1): the stratified bootstrap of :func:`bootstrap_suite_ci`; families
@@ -262,9 +271,9 @@ def _cooperation_gain(rows: Mapping[str, list[tuple[int, float | None]]], famili
     if any(g is None for task_rows in rows.values() for _, g in task_rows):
         return None
     tasks = {task: task_score(task, [g for _, g in r], seeds=[s for s, _ in r]) for task, r in rows.items()}
-    low, high = percentile_interval(_resampled_suite(families, {t: v.gains for t, v in tasks.items()},
-                                                     n_resamples, seed))
-    return CooperationGain(_suite_statistic(families, {t: v.mean for t, v in tasks.items()}), float(low),
+    low, high = percentile_interval(resampled_suite(families, {t: v.gains for t, v in tasks.items()},
+                                                    n_resamples, seed))
+    return CooperationGain(float(suite_statistic(families, {t: v.mean for t, v in tasks.items()})), float(low),
                            float(high), tasks)
 
 
@@ -305,9 +314,9 @@ def suite_score(episodes: Iterable[Mapping], suite_tasks: Sequence[str] | None =
     if not covered:
         return None
     families = _families(version, covered)
-    S = _suite_statistic(families, {t: v.mean for t, v in covered.items()})
-    low, high = percentile_interval(_resampled_suite(families, {t: v.gains for t, v in covered.items()},
-                                                     n_resamples, seed))
+    S = float(suite_statistic(families, {t: v.mean for t, v in covered.items()}))
+    low, high = percentile_interval(resampled_suite(families, {t: v.gains for t, v in covered.items()},
+                                                    n_resamples, seed))
     cooperation = None
     if version >= 2 and non_cooperative is not None:
         cooperation = _cooperation_gain({t: [(r[2], r[3]) for r in by_task[t]] for t in covered}, families,
@@ -369,7 +378,7 @@ def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
     if len(kinds) > 1:
         raise ValueError(f"the scores were computed under different score versions "
                          f"{sorted({score.version for score in scores})}; only one suite's scores pair")
-    return gains, _resampled_suite(scores[0].families, gains, n_resamples, seed)
+    return gains, resampled_suite(scores[0].families, gains, n_resamples, seed)
 
 
 def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED,
@@ -447,47 +456,5 @@ def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_R
                                        int(np.sum(gains[1] > gains[0])), int(gains.shape[1]))
     low, high = percentile_interval(suite[1] - suite[0], confidence)
     means = {task: d.mean for task, d in tasks.items()}
-    return (PairedDifference(_suite_statistic(a.families, means), float(low), float(high),
+    return (PairedDifference(float(suite_statistic(a.families, means)), float(low), float(high),
                              sum(m > 0 for m in means.values()), len(means)), tasks)
-
-
-def performance_profile(gains_by_task: Mapping[str, np.ndarray], taus: Sequence[float]) -> np.ndarray:
-    """Fraction of episodes with gain above each threshold τ (tasks weigh equally).
-
-    ``profile(τ) = mean_t  mean_i [g_{t,i} > τ]`` (rliable's run-score distribution).
-
-    Args:
-        gains_by_task: per task, the ``(n_t,)`` gains.
-        taus: thresholds.
-
-    Returns:
-        ``(len(taus),)`` fractions in [0, 1], non-increasing in τ.
-    """
-    if not gains_by_task:
-        raise ValueError("need at least one task")
-    tau = np.asarray(taus, dtype=np.float64)
-    per_task = [(np.asarray(g, dtype=np.float64)[:, None] > tau[None, :]).mean(axis=0) for g in gains_by_task.values()]
-    return np.mean(per_task, axis=0)
-
-
-def probability_of_improvement(x_by_task: Mapping[str, np.ndarray], y_by_task: Mapping[str, np.ndarray]) -> float:
-    """P(X > Y): the chance that a run of X beats a run of Y on a random task (rliable).
-
-    Per task, the Mann–Whitney statistic ``(1 / n m) Σ_i Σ_j S(x_i, y_j)`` with S = 1 if
-    x > y, ½ if equal, 0 otherwise; averaged over the tasks both cover.
-
-    Args:
-        x_by_task, y_by_task: per task, per-seed scores of X and Y (e.g. gains).
-
-    Raises:
-        ValueError: no task in common.
-    """
-    common = [t for t in x_by_task if t in y_by_task]
-    if not common:
-        raise ValueError("X and Y share no task")
-    probs = []
-    for t in common:
-        x = np.asarray(x_by_task[t], dtype=np.float64)[:, None]
-        y = np.asarray(y_by_task[t], dtype=np.float64)[None, :]
-        probs.append(float(((x > y) + 0.5 * (x == y)).mean()))
-    return float(np.mean(probs))
