@@ -36,8 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.bench.reproduce.common import write_paper_report
-from swarmloc.envs.recorded.nlos_statistics import (ACF_LAGS_S, MAGNITUDE_QUANTILES, ResidualStatistics,
-                                                    channel_offsets, residual_statistics, robust_sigma)
+from swarmloc.envs.recorded.nlos_statistics import (ACF_LAGS_S, MAD_TO_SIGMA, MAGNITUDE_QUANTILES,
+                                                    ResidualStatistics, channel_offsets, residual_statistics,
+                                                    robust_sigma)
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.tasks.nlos_fit_values import UTIL_NLOS_TDOA, UTIL_NLOS_TWR
 from swarmloc.envs.tasks.v1 import INDOOR_NLOS
@@ -109,6 +110,19 @@ def load_dataset(dataset: Dataset, data_dir: str | Path | None = None) -> list[S
         sigmas = [robust_sigma(*_recording(los, data_dir)[:2]) for los in dataset.los[task]]
         out.append(Series(task, residual, valid, float(np.median(sigmas)), dt))
     return out
+
+
+def log00_sigma(data_dir: str | Path | None = None) -> float:
+    """Median over anchors of the robust residual std of the static TWR calibration log ``log00`` [m]."""
+    from swarmloc.envs.recorded.util_flight import range_residuals, read_anchors, read_flight_log
+    from swarmloc.envs.recorded.util_import import find_util_data
+
+    folder = find_util_data(data_dir)
+    log = read_flight_log(folder / "log00")
+    resid, ids = range_residuals(log.uwb, log.mocap, read_anchors(folder)), log.uwb[:, 1].astype(int)
+    spreads = [MAD_TO_SIGMA * np.median(np.abs(resid[ids == a] - np.median(resid[ids == a])))
+               for a in np.unique(ids)]
+    return float(np.median(spreads))
 
 
 def real_statistics(series: list[Series]) -> ResidualStatistics:
@@ -261,24 +275,43 @@ def reproduce_nlos_fit(out: Path, data_dir: str | Path | None = None, max_evalua
     for dataset in DATASETS:
         series = load_dataset(dataset, data_dir)
         real = real_statistics(series)
-        los = real_statistics([Series(t, *_recording(t, data_dir)[:2], s.sigma_los, s.dt)
-                               for s in series for t in dataset.los[s.task] if t != s.task])
         fitted, objective, n_eval = fit_dataset(series, real, start, max_evaluations)
         frozen = FROZEN[dataset.name]
-        rows = {"real (obstacle flights)": real, f"simulated, v1 INDOOR_NLOS": simulated_statistics(start, series),
+        rows = {"real (obstacle flights)": real, "simulated, v1 INDOOR_NLOS": simulated_statistics(start, series),
                 "simulated, fitted now": simulated_statistics(fitted, series),
                 "simulated, frozen UTIL_NLOS": simulated_statistics(frozen, series)}
-        if dataset.name == "tdoa":
-            rows = {"real (line-of-sight flights)": los, **rows}
+        los_series = [Series(t, *_recording(t, data_dir)[:2], s.sigma_los, s.dt)
+                      for s in series for t in dataset.los[s.task] if t != s.task]
+        if los_series:
+            rows = {"real (line-of-sight flights)": real_statistics(los_series), **rows}
+        note = []
+        if dataset.name == "twr":
+            note = [f"σ_LOS {series[0].sigma_los:.3f} m is the flight's median robust std over the anchors; the "
+                    f"static log00 hover's is {log00_sigma(data_dir):.3f} m (no motion: too small a reference "
+                    "for a flight).", ""]
         lines += [f"## {dataset.name.upper()}: {', '.join(s.task.removeprefix('swarmloc/') for s in series)}", "",
-                  *header, *(_stat_row(k, v) for k, v in rows.items()), "",
+                  *note, *header, *(_stat_row(k, v) for k, v in rows.items()), "",
                   *params_header, _params_row("v1 INDOOR_NLOS", start), _params_row("fitted now", fitted),
                   _params_row("frozen", frozen), "",
-                  f"Nelder–Mead: {n_eval} evaluations, objective {objective:.3f}.", "",
+                  f"Grid ({len(GRID['onset_rate']) * len(GRID['mean_duration']) * len(GRID['mean_bias']) * len(GRID['tau']) + 1} "
+                  f"points) + Nelder–Mead: {n_eval} evaluations in all, objective {objective:.3f}.", "",
                   "Constant offsets and how the bias spreads over the channels (a Gauss–Markov process with one "
                   "parameter set biases every channel alike):", "", *_channel_rows(series), ""]
         raw["datasets"][dataset.name] = {
             "flights": {s.task: {"sigma_los": s.sigma_los} for s in series},
             "statistics": {k: v.as_dict() for k, v in rows.items()}, "fitted": fitted, "frozen": dict(frozen),
             "start": start, "objective": objective, "evaluations": n_eval}
+    lines += ["## Reading", "",
+              "* Is it a Gauss–Markov process? In its time structure, roughly: the fitted process matches the "
+              "share, the magnitudes within the test's tolerances and the autocorrelation at 0.2 / 1 / 3 s. But the "
+              "episodes it needs are about 1 s long with τ under 1 s, an order of magnitude shorter than v1's "
+              "hand-chosen INDOOR_NLOS, and the TWR fit has a mean bias near 0: a bias switched on about half of "
+              "the time with a half-normal spread, i.e. a heavy tail rather than discrete obstruction episodes.",
+              "* Where it is not: the bias concentrates on a few channels (the per-channel table: a median channel "
+              "is biased 5–12 % of the time, one channel per flight 30–60 %: TWR anchor 6's slow drift, the pairs "
+              "behind the metal box), which one parameter set for every channel cannot produce; and each channel "
+              "has a constant offset (spread 0.07–0.18 m) that the statistics remove by centring on the channel "
+              "median and that is not NLOS.",
+              "* The line-of-sight TDOA flights are biased by the same definition too (their row): obstacles add a "
+              "few points of share and, above all, the large magnitudes (q90).", ""]
     return write_paper_report(out, "nlos-fit", "\n".join(lines), raw)
