@@ -19,11 +19,13 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES
+from swarmloc.bench.scoring.families import group_by_family
 from swarmloc.leaderboard.site.ranking import (
     Column,
     Standing,
     SuiteBoard,
     best_ranked_on,
+    by_suite,
     column_score,
     family_columns,
     fmt,
@@ -31,12 +33,14 @@ from swarmloc.leaderboard.site.ranking import (
     fmt_score,
     fmt_times,
     status,
-    suite_boards,
+    suite_board,
+    track_boards,
 )
 from swarmloc.leaderboard.store.database import LeaderboardEntry, LeaderboardStore
 
 if TYPE_CHECKING:
     from swarmloc.leaderboard.site.plots import SitePlot
+    from swarmloc.leaderboard.site.track_plots import TrackSection
 
 _STATIC_FILES = ("leaderboard.css", "leaderboard.js")
 _PLOT_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg", ".webp")
@@ -160,18 +164,45 @@ def _slug(*parts: str) -> str:
     return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "suite"
 
 
-def _figures(plots: Sequence[SitePlot], root: Path) -> str:
-    if not plots:
-        return ""
+def _figure_list(plots: Sequence[SitePlot], root: Path) -> str:
     figures = "\n".join(
         f"<figure><img src=\"{_e(quote(p.path.relative_to(root).as_posix()))}\" alt=\"{_e(p.alt)}\">"
         f"<figcaption>{_e(p.caption)}</figcaption></figure>"
         for p in plots
     )
-    return f"<h3>Plots</h3>\n<div class=\"plots suite-plots\">{figures}</div>"
+    return f"<div class=\"plots suite-plots\">{figures}</div>"
 
 
-def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], root: Path) -> str:
+def _figures(plots: Sequence[SitePlot], root: Path) -> str:
+    if not plots:
+        return ""
+    return f"<h3>Plots</h3>\n{_figure_list(plots, root)}"
+
+
+def _track_sections(slug: str, sections: Sequence[TrackSection], root: Path) -> str:
+    """A v2 suite's per-track parts: each track's task families and its figures."""
+    parts = [
+        "<p class=\"meta\">Benchmark v2 scores each track apart (score v2: mean over seeds, then over a "
+        "family's tasks, then over families; hierarchical-bootstrap CIs, families then seeds). The tables "
+        "above span the whole suite; below, each track on its own tasks.</p>"
+    ]
+    for section in sections:
+        families = group_by_family(section.board.tasks)
+        listed = ", ".join(f"{family} ({len(tasks)})" for family, tasks in families.items())
+        parts.append(f"<section class=\"track\" id=\"track-{_e(slug)}-{_e(_slug(section.track))}\">")
+        parts.append(f"<h3>{_e(section.title)}</h3>")
+        parts.append(f"<p class=\"meta\">{len(section.board.tasks)} tasks in {len(families)} families: "
+                     f"{_e(listed)}.</p>")
+        if section.plots:
+            parts.append(_figure_list(section.plots, root))
+        else:
+            parts.append("<p class=\"empty\">No method has a score on this track yet.</p>")
+        parts.append("</section>")
+    return "\n".join(parts)
+
+
+def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], root: Path,
+                tracks: dict[str, list[TrackSection]] | None = None) -> str:
     generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     parts = [
         "<header><h1>swarmloc leaderboard</h1>",
@@ -214,7 +245,10 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
                 + ("" if ref is None else f" (<a href=\"methods/{ref.id}.html\">#{ref.id}</a>)")
                 + " on the same task and seed.</p>"
             )
-        parts.append(_figures(plots.get(slug, []), root))
+        if tracks and tracks.get(slug):
+            parts.append(_track_sections(slug, tracks[slug], root))
+        else:
+            parts.append(_figures(plots.get(slug, []), root))
         parts.append("</section>")
     parts.append("</main>")
     return _page("swarmloc leaderboard", "\n".join(parts), root="")
@@ -342,7 +376,9 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     ``methods/<id>.html`` (metadata, provenance, per-task table, plots),
     ``results/<id>.json`` (the submitted results files, for download),
     ``plots/<id>/`` (images from ``swarmloc.bench.reports.plots.plot_results`` when available),
-    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn),
+    ``plots/suite-<suite>-<version>/`` (the suite plots, always drawn; for a benchmark v2 suite one
+    folder per track instead, ``<track>/``, with rliable's plots and a family heat map:
+    :mod:`swarmloc.leaderboard.site.track_plots`),
     ``explain/<id>/`` (a shipped Track A method's trust decisions on the step-NLOS task:
     :mod:`swarmloc.leaderboard.site.explain`)
     and ``static/`` (CSS and the vanilla-JS table sorter). No external resources.
@@ -365,17 +401,22 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     package_static = resources.files("swarmloc.leaderboard.site") / "static"
     for name in _STATIC_FILES:
         (out / "static" / name).write_bytes((package_static / name).read_bytes())
-    boards = suite_boards(store.entries(suite))
+    groups = by_suite(store.entries(suite))
+    boards = [suite_board(name, version, group) for (name, version), group in groups.items()]
     explain = plots if explanations is None else explanations
     for board in boards:
         for standing in board.standings:
             _write_method(out, standing, len(board.tasks), plots, explain)
-    suite_figures = {}
+    suite_figures, track_figures = {}, {}
     for board in boards:
         slug = _slug(board.name, board.version)
-        suite_figures[slug] = _draw_suite_plots(board, out / "plots" / f"suite-{slug}")
+        per_track = track_boards(board, groups[(board.name, board.version)])
+        if per_track:  # a v2 suite: one part per track, never a plot that mixes tracks
+            track_figures[slug] = _draw_track_plots(per_track, out / "plots" / f"suite-{slug}")
+        else:
+            suite_figures[slug] = _draw_suite_plots(board, out / "plots" / f"suite-{slug}")
     index = out / "index.html"
-    index.write_text(_index_html(boards, suite_figures, out), encoding="utf-8")
+    index.write_text(_index_html(boards, suite_figures, out, track_figures), encoding="utf-8")
     return index
 
 
@@ -390,6 +431,23 @@ def _draw_suite_plots(board: SuiteBoard, plots_dir: Path) -> list[SitePlot]:
     except Exception as err:  # a broken plot must not take the site down
         warnings.warn(f"suite plots of {board.name} v{board.version} failed: {err}", stacklevel=2)
         return []
+
+
+def _draw_track_plots(boards: dict[str, SuiteBoard], plots_dir: Path) -> list[TrackSection]:
+    """A v2 suite's per-track figures, ``plots_dir/<track>/`` (a track whose drawing fails, with a warning,
+    keeps its section without figures)."""
+    from swarmloc.leaderboard.site.track_plots import TrackSection, track_plots
+
+    if plots_dir.exists():
+        shutil.rmtree(plots_dir)
+    sections = []
+    for track, board in boards.items():
+        try:
+            sections.append(track_plots(board, track, plots_dir / track))
+        except Exception as err:  # a broken plot must not take the site down
+            warnings.warn(f"plots of {board.name} v{board.version}, track {track}, failed: {err}", stacklevel=2)
+            sections.append(TrackSection(track, board, ()))
+    return sections
 
 
 def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False) -> None:

@@ -34,12 +34,17 @@ separable ranks come from the hierarchical bootstrap. Its cooperation gain needs
 ``non-cooperative``'s RMSE per episode, which results files do not carry: it is taken, the way
 the uniform fallback is, from the suite's ``non-cooperative`` entry (same preference), and is
 None on a board without one.
+
+**Tracks.** A v2 suite's tasks fall into tracks (``spec.track``: cooperative, robust-ranging;
+:mod:`swarmloc.bench.scoring.tracks`) whose scores never mix: :func:`track_boards` scores and
+ranks each track's tasks as a board of their own, which the site draws a part of the front page
+for (:mod:`swarmloc.leaderboard.site.track_plots`).
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,7 +52,8 @@ import numpy as np
 
 from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE
 from swarmloc.bench.scoring.families import group_by_family, short_task, task_label
-from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, separable_ranks, suite_score
+from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, score_version, separable_ranks, suite_score
+from swarmloc.bench.scoring.tracks import TRACKS, TrackOf, task_track, tasks_by_track
 from swarmloc.leaderboard.store.database import LeaderboardEntry
 
 SuiteKey = tuple[str, str]
@@ -178,14 +184,16 @@ def _order_key(standing: Standing) -> tuple[Any, ...]:
     return (s is None, -(s.S if s else 0.0), -(s.iqm if s else 0.0), e.created_utc, e.id or 0)
 
 
-def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry]) -> SuiteBoard:
+def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry],
+                tasks: Collection[str] | None = None) -> SuiteBoard:
     """Score and rank the entries of one suite (see the module docstring).
 
     Args:
         name, version: the suite.
         entries: its stored entries.
+        tasks: only these of its tasks (a track's board: :func:`track_boards`); default every task.
     """
-    episodes = {id(e): episodes_of(e) for e in entries}
+    episodes = {id(e): [ep for ep in episodes_of(e) if tasks is None or ep["task"] in tasks] for e in entries}
     tasks = tuple(dict.fromkeys(ep["task"] for e in entries for ep in episodes[id(e)]))
     reference = reference_entry(entries)
     uniform: dict[tuple[str, int], float | None] = {}
@@ -222,6 +230,37 @@ def by_suite(entries: Iterable[LeaderboardEntry]) -> dict[SuiteKey, list[Leaderb
 def suite_boards(entries: Iterable[LeaderboardEntry]) -> list[SuiteBoard]:
     """One board per suite, in ``by_suite`` order."""
     return [suite_board(name, version, group) for (name, version), group in by_suite(entries).items()]
+
+
+def registered_track(task: str) -> str | None:
+    """The track of a registered task; None for a v0/v1 task or one this install does not register."""
+    try:
+        return task_track(task)
+    except KeyError:
+        return None
+
+
+def track_boards(board: SuiteBoard, entries: Sequence[LeaderboardEntry],
+                 track_of: TrackOf = registered_track) -> dict[str, SuiteBoard]:
+    """A benchmark v2 suite's board per track: each track's tasks scored and ranked as a suite of their own.
+
+    Scores never mix tracks (:mod:`swarmloc.bench.scoring.tracks`): on a track's board the
+    score, its CI, the separable ranks and every plot see that track's tasks only.
+
+    Args:
+        board: the suite's board (its name picks the score).
+        entries: the suite's stored entries (those ``board`` was built from).
+        track_of: task → track (default: the registered spec's).
+
+    Returns:
+        track → its board, tracks in ``TRACKS`` order; empty for a suite scored by score v1
+        or one whose tasks name no track.
+    """
+    if score_version(board.name) < 2:
+        return {}
+    groups = tasks_by_track(board.tasks, track_of)
+    return {track: suite_board(board.name, board.version, entries, tasks=tuple(groups[track]))
+            for track in TRACKS if track in groups}
 
 
 def split_ranked(entries: Iterable[LeaderboardEntry]) -> tuple[list[LeaderboardEntry], list[LeaderboardEntry]]:
@@ -365,6 +404,7 @@ __all__ = [
     "fmt_score",
     "fmt_times",
     "reference_entry",
+    "registered_track",
     "short_task",
     "split_ranked",
     "status",
@@ -372,4 +412,5 @@ __all__ = [
     "suite_boards",
     "task_columns",
     "task_rmse",
+    "track_boards",
 ]
