@@ -89,18 +89,20 @@ def save_figure(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
-def draw_intervals(ax: plt.Axes, board: SuiteBoard, rows: Sequence[Standing], centres: Sequence[float],
+def draw_intervals(ax: plt.Axes, board: SuiteBoard, rows: Sequence[Standing], centres: Sequence[float | None],
                    intervals: Sequence[tuple[float, float]], styles: Mapping[str, Any], *, reference: float) -> None:
     """One row per method: its value and interval in its own look, the reference dashed, tables ruled apart.
 
     Args:
         ax: where to draw (rows at y = 0, 1, ...).
         board: the board the rows come from (ranked, partial, privileged: a rule between them).
-        rows, centres, intervals: the methods, their values and their ``(low, high)``.
+        rows, centres, intervals: the methods, their values (None: the row stays empty) and their ``(low, high)``.
         styles: method name → its ``MethodStyle``.
         reference: where uniform stands (a dashed line).
     """
     for y, (standing, centre, (low, high)) in enumerate(zip(rows, centres, intervals, strict=True)):
+        if centre is None:
+            continue
         style = styles[standing.entry.name]
         bars = ax.errorbar([centre], [y], xerr=[[centre - low], [high - centre]],
                            fmt=style.marker, color=style.colour, ecolor=style.colour, capsize=3,
