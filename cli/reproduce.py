@@ -194,19 +194,22 @@ class Labels:
 
 @dataclass
 class Calibration:
-    """Calibrate the v1 tasks: per task the five criteria (ceiling valid, the fault matters, headroom, the paper's
-    phenomenon, nothing degenerate) from the classical methods, the split comparison and the gap closed."""
+    """Calibrate the tasks. --version 1: per v1 task the five criteria (ceiling valid, the fault matters, headroom,
+    the paper's phenomenon, nothing degenerate), the split comparison and the gap closed. --version 2: the admission
+    criteria of every v2 task on dev seeds (which tasks enter each track's headline)."""
 
+    version: int = 1
+    """Benchmark version: 1 (the suite's v1 tasks) or 2 (the v2 tasks, dev seeds, docs/calibration-v2.*)."""
     suite: str = "standard-v1"
-    """Suite whose tasks are calibrated (see docs/suites.md)."""
+    """--version 1: suite whose tasks are calibrated (see docs/suites.md)."""
     tasks: str | None = None
-    """Only these tasks of the suite, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
+    """Only these tasks, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
     seeds: int | None = None
-    """The first this many seeds of each task, at least 2 (default: all of the suite's)."""
-    out_md: Path = Path("docs/calibration.md")
-    """Markdown report to write."""
-    out_json: Path = Path("docs/calibration.json")
-    """The report's numbers, machine-readable."""
+    """The first this many seeds of each task, at least 2 (default: all of the suite's; --version 2: 8 dev seeds)."""
+    out_md: Path | None = None
+    """Markdown report to write (default docs/calibration.md, --version 2: docs/calibration-v2.md)."""
+    out_json: Path | None = None
+    """The report's numbers, machine-readable (default docs/calibration.json, --version 2: docs/calibration-v2.json)."""
     workers: int = 1
     """Worker processes of the runner (1 … 64)."""
     progress: bool = True
@@ -222,12 +225,25 @@ class Calibration:
         return shlex.join(words)
 
     def run(self) -> int:
-        from swarmloc.bench.reproduce.calibration import reproduce_calibration
+        if self.version not in (1, 2):
+            raise SystemExit(f"--version {self.version}: the calibrated benchmark versions are 1 and 2")
+        suffix = "" if self.version == 1 else "-v2"
+        out_md = self.out_md or Path(f"docs/calibration{suffix}.md")
+        out_json = self.out_json or Path(f"docs/calibration{suffix}.json")
 
         def write() -> Path:
-            reproduce_calibration(self.suite, self.tasks, self.seeds, self.out_md, self.out_json,
-                                  workers=self.workers, progress=self.progress, command=self.command_line())
-            return self.out_md
+            if self.version == 2:
+                from swarmloc.bench.reproduce.calibration_v2 import DEFAULT_SEEDS, reproduce_calibration_v2
+
+                tasks = [t.strip() for t in self.tasks.split(",")] if self.tasks else None
+                reproduce_calibration_v2(out_md, out_json, tasks=tasks, seeds=self.seeds or DEFAULT_SEEDS,
+                                         workers=self.workers, progress=self.progress, command=self.command_line())
+            else:
+                from swarmloc.bench.reproduce.calibration import reproduce_calibration
+
+                reproduce_calibration(self.suite, self.tasks, self.seeds, out_md, out_json, workers=self.workers,
+                                      progress=self.progress, command=self.command_line())
+            return out_md
 
         return print_report(write)
 

@@ -52,7 +52,7 @@ def test_specs_are_frozen_and_unknown_task_is_named():
     spec = get_spec("swarmloc/Ideal-v0")
     with pytest.raises(ValidationError):
         spec.n_uav = 3  # type: ignore[misc]
-    with pytest.raises(KeyError, match=r"unknown task ID 'swarmloc/Nope-v0'; known: swarmloc/AnchorFree-v0, swarmloc/CascadedFault-v0"):
+    with pytest.raises(KeyError, match=r"unknown task ID 'swarmloc/Nope-v0'; known: swarmloc/AnchorFree-v0, swarmloc/AnchorNLOS-v2, "):
         get_spec("swarmloc/Nope-v0")
 
 

@@ -41,7 +41,8 @@ def test_quick_and_dev_seed_ranges():
 def test_unknown_suite_lists_names():
     with pytest.raises(KeyError, match="known suites: standard-v0, quick, dev"):
         get_suite("standard")
-    assert suite_names() == ["standard-v0", "quick", "dev", "real-v0", "standard-v1", "quick-v1", "dev-v1", "real-v1"]
+    assert suite_names() == ["standard-v0", "quick", "dev", "real-v0", "standard-v1", "quick-v1", "dev-v1", "real-v1",
+                             "standard-v2", "quick-v2", "dev-v2"]
 
 
 def test_check_training_seeds():

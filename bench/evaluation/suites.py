@@ -24,6 +24,13 @@ use dev seeds, never test seeds. Suites:
   imported (``SWARMLOC_DATA``); :func:`require_data` says what is missing and how to
   import it.
 
+* ``standard-v2`` — the leaderboard suite of benchmark v2: the v2 tasks of both tracks that passed
+  every admission criterion on dev seeds (:data:`STANDARD_V2_TASKS`, from docs/calibration-v2.json),
+  32 test seeds each; its hash covers the task specs and the calibration's rows
+  (:data:`CALIBRATION_V2_SHA256`). Tracks are scored apart (``scoring.tracks``), with score v2.
+* ``quick-v2`` / ``dev-v2`` — the same tasks, the first 4 test seeds / 8 dev seeds. The
+  robust-ranging track's real flights are ``real-v1``.
+
 * ``real-v1`` — the real flights of v1 (:data:`REAL_V1_TASKS`): ``UTILFlight-v1`` (the TWR
   flight with Vicon-frame anchors) and the eight UTIL TDOA flights (TDOA2 and TDOA3, line of
   sight and NLOS with wood, cardboard, plastic and metal obstacles), 4 test seeds each; it
@@ -194,8 +201,51 @@ def _real_v1() -> Suite:
                  "needs SWARMLOC_DATA")
 
 
+#: the headline of benchmark v2: the v2 tasks that pass every admission criterion of their track on dev seeds
+#: (``swarmloc reproduce calibration --version 2`` → docs/calibration-v2.json, its ``in_headline`` rows, frozen
+#: here before any test-seed evaluation; a test holds the two equal)
+STANDARD_V2_TASKS: tuple[str, ...] = (
+    "swarmloc/Scale8-v2",
+    "swarmloc/Scale16-v2",
+    "swarmloc/Scale32-v2",
+    "swarmloc/ScaleRandom-v2",
+    "swarmloc/ScaleRandomShifted-v2",
+    "swarmloc/AnchorNLOS-v2",
+    "swarmloc/AnchorNLOSRandom-v2",
+    "swarmloc/AnchorNLOSRandomShifted-v2",
+    "swarmloc/TDOA-v2",
+)
+#: SHA-256 of docs/calibration-v2.json's rows (``calibration_v2.rows_sha256``), covered by the v2 suites' hashes
+CALIBRATION_V2_SHA256 = "e79f559c3d81b4ceac7c13cdbdbd1bc197388f8f2c009262eca01f0521c1b457"
+
+
+def _v2_specs(tasks: Iterable[str]) -> tuple[str, ...]:
+    """What a v2 suite's hash covers beside its episodes: the task specs and the calibration that admitted them."""
+    return _specs(tasks) + (f"calibration-v2 rows sha256 {CALIBRATION_V2_SHA256}",)
+
+
+def _standard_v2() -> Suite:
+    tasks = STANDARD_V2_TASKS
+    return Suite("standard-v2", "2", _episodes(tasks, TEST_SEED_START, 32),
+                 f"leaderboard suite v2: the {len(tasks)} headline tasks of both tracks (admitted on dev seeds, "
+                 "docs/calibration-v2.md) × 32 test seeds (1_000_000 … 1_000_031); the hash covers the task specs "
+                 "and the calibration", specs=_v2_specs(tasks))
+
+
+def _quick_v2() -> Suite:
+    return Suite("quick-v2", "2", _episodes(STANDARD_V2_TASKS, TEST_SEED_START, 4),
+                 "standard-v2's tasks × the first 4 test seeds (demo, smoke tests)", specs=_v2_specs(STANDARD_V2_TASKS))
+
+
+def _dev_v2() -> Suite:
+    return Suite("dev-v2", "2", _episodes(STANDARD_V2_TASKS, DEV_SEED_START, 8),
+                 "standard-v2's tasks × 8 dev seeds (2_000_000 … 2_000_007), for tuning",
+                 specs=_v2_specs(STANDARD_V2_TASKS))
+
+
 SUITES = {"standard-v0": _standard_v0, "quick": _quick, "dev": _dev, "real-v0": _real_v0,
-          "standard-v1": _standard_v1, "quick-v1": _quick_v1, "dev-v1": _dev_v1, "real-v1": _real_v1}
+          "standard-v1": _standard_v1, "quick-v1": _quick_v1, "dev-v1": _dev_v1, "real-v1": _real_v1,
+          "standard-v2": _standard_v2, "quick-v2": _quick_v2, "dev-v2": _dev_v2}
 
 
 def missing_data(suite: Suite) -> dict[str, str]:

@@ -1,7 +1,7 @@
 """``swarmloc reproduce calibration --version 2``: which v2 tasks are admitted to the headline → docs/calibration-v2.*.
 
 Benchmark v2 admits a task to its track's headline only where it measures what the track is
-about (DESIGN.md, "Benchmark v2"). The criteria are computed on **dev seeds only**
+about (docs/benchmark-v2.md). The criteria are computed on **dev seeds only**
 (``DEV_SEED_START`` …), before any test-seed evaluation, and the suites freeze what they say
 (``suites.STANDARD_V2_TASKS`` and the hash of the rows, ``suites.CALIBRATION_V2_SHA256``; a test
 holds both equal to ``docs/calibration-v2.json``). Per task, on the same dev seeds:
@@ -49,7 +49,7 @@ from swarmloc.bench.evaluation.suites import DEV_SEED_START, Suite
 from swarmloc.bench.reproduce import calibration_criteria as C
 from swarmloc.bench.scoring.families import group_by_family, task_family, task_label, task_split
 from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
-from swarmloc.envs.tasks.specs import Faults
+from swarmloc.envs.tasks.specs import Faults, TaskSpec
 from swarmloc.envs.tasks.v2 import CATALOGUE_V2
 
 #: a: the bound with the peers removed, at least this many times the bound
@@ -89,6 +89,17 @@ def candidate_tasks() -> list[str]:
 # --------------------------------------------------------------------------- running
 
 
+def fault_free(spec: TaskSpec) -> dict[str, Any]:
+    """The overrides of ``spec``'s fault-free counterpart: every fault removed (same truth, same noise draws).
+
+    A task scored on each episode's healthy UAVs (``nodes_from_schedule="healthy"``) scores every UAV of
+    ``scoring.nodes`` once no UAV is faulty."""
+    over: dict[str, Any] = {"faults": Faults().model_dump()}
+    if spec.scoring.nodes_from_schedule == "healthy":
+        over["scoring"] = {"nodes_from_schedule": "all"}
+    return over
+
+
 def _run(methods: Sequence[str], tasks: Sequence[str], seeds: Sequence[int], overrides: Mapping[str, Any] | None,
          workers: int, progress: bool) -> dict[str, TaskOutcome]:
     """``methods`` on ``tasks`` × ``seeds`` through the runner, with ``overrides`` on every task."""
@@ -124,7 +135,10 @@ def measure(tasks: Sequence[str], seeds: Sequence[int], *, workers: int = 1, pro
     coop = [t for t in tasks if get_spec(t, **base).track == "cooperative"]
     on = _run(METHODS + ("non-cooperative",), coop, seeds, base, workers, progress)
     on.update(_run(METHODS, [t for t in tasks if t not in coop], seeds, base, workers, progress))
-    off = _run(("uniform", CENTRAL), tasks, seeds, {**base, "faults": Faults().model_dump()}, workers, progress)
+    off = {}
+    for t in tasks:  # one run per task: the fault-free counterpart's overrides depend on the task
+        off.update(_run(("uniform", CENTRAL), [t], seeds, {**base, **fault_free(get_spec(t, **base))}, workers,
+                        progress))
     peerless = _run(("uniform",), coop, seeds, {**base, "sensors": {"peers": {"kind": "none"}}}, workers, progress)
     out = {}
     for t in tasks:
@@ -266,7 +280,7 @@ def render(rows: Sequence[Mapping[str, Any]], verdicts: Mapping[str, Any], famil
              "(· : does not apply). Criteria and thresholds: `bench/reproduce/calibration_v2.py`.", "",
              "a: bound without peers / bound ≥ 1.5 (cooperative); b: uniform / uniform without faults ≥ 1.5; "
              "c: centralized-oracle / bound without faults ≤ 1.3; d: the gates' gap closed in [0, 0.7] on at least "
-             "half of the track's fault tasks (the value is the task's own); e: non-cooperative / oracle ≥ 1.25 "
+             "half of the track's fault tasks (the cell: the task's own value and whether it is in [0, 0.7]; the track's verdict above each table); e: non-cooperative / oracle ≥ 1.25 "
              "(cooperative); f: lowest RMSE / bound, nothing below it, the oracle no worse than any; g: random / "
              "best method ≥ 1.10.", ""]
     for track in TRACKS:
@@ -283,7 +297,8 @@ def render(rows: Sequence[Mapping[str, Any]], verdicts: Mapping[str, Any], famil
         for r in mine:
             c, m = r["criteria"], r["rmse"]
             nc = f"{m['non-cooperative']:.3f}" if "non-cooperative" in m else "—"
-            lines.append(f"| {task_label(r['task'])} | " + " | ".join(_cell(c[k]) for k in CRITERIA)
+            cells = [_cell({**c[k], "pass": c[k]["task_pass"]} if k == "headroom" else c[k]) for k in CRITERIA]
+            lines.append(f"| {task_label(r['task'])} | " + " | ".join(cells)
                          + f" | {m['uniform']:.3f} | {nc} | {m['oracle']:.3f} | {m[CENTRAL]:.3f} | "
                          f"{r['bound']['on']:.3f} | {'**yes**' if r['in_headline'] else 'no: ' + ', '.join(r['failing'])} |")
         lines.append("")
@@ -299,7 +314,7 @@ def render(rows: Sequence[Mapping[str, Any]], verdicts: Mapping[str, Any], famil
 def reproduce_calibration_v2(out_md: Path, out_json: Path, *, tasks: Sequence[str] | None = None,
                              seeds: int = DEFAULT_SEEDS, workers: int = 1, progress: bool = False,
                              command: str = "swarmloc reproduce calibration --version 2",
-                             overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+                             overrides: Mapping[str, Any] | None = None, sim_to_real: bool = True) -> dict[str, Any]:
     """Run the v2 calibration and write the Markdown report and its JSON (``rows``: one per task).
 
     Args:
@@ -310,6 +325,8 @@ def reproduce_calibration_v2(out_md: Path, out_json: Path, *, tasks: Sequence[st
         command: the command line the report names.
         overrides: spec overrides for every run (shortened episodes in tests; the report is then not the
             calibration).
+        sim_to_real: add the robust-ranging track's ranking of the classical methods beside their ranking on the
+            real flights (``sim_to_real.measure_sim_to_real``, Kendall τ with a bootstrap CI; needs the UTIL data).
 
     Returns:
         The JSON document.
@@ -323,13 +340,24 @@ def reproduce_calibration_v2(out_md: Path, out_json: Path, *, tasks: Sequence[st
     numbers = measure(chosen, seed_list, workers=workers, progress=progress, overrides=overrides)
     rows, verdicts = build_rows(numbers, seed_list, overrides)
     families = family_ratios(rows)
+    real = None
+    if sim_to_real:
+        from swarmloc.bench.reproduce.sim_to_real import measure_sim_to_real
+
+        real = measure_sim_to_real(sim_seeds=seed_list, overrides=overrides, progress=progress)
+        real.pop("rmse", None)  # the per-episode tables stay out of the report
     doc = {"command": command, "seeds": seed_list, "rows": rows, "rows_sha256": rows_sha256(rows),
-           "tracks": verdicts, "families": families,
+           "tracks": verdicts, "families": families, "sim_to_real": real,
            "thresholds": {"peer_information": PEER_INFORMATION_RATIO, "fault_matters": FAULT_RATIO,
                           "attainable": ATTAINABLE_RATIO, "gap_closed_max": GAP_CLOSED_MAX,
                           "headroom_task_fraction": HEADROOM_TASK_FRACTION, "kind_rule": KIND_RULE_RATIO,
                           "random_min_ratio": C.RANDOM_MIN_RATIO},
            "seconds": round(time.perf_counter() - t0, 1), "provenance": collect_provenance().model_dump(mode="json")}
     write_text_atomic(out_json, json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(out_md, render(rows, verdicts, families, seed_list, command))
+    text = render(rows, verdicts, families, seed_list, command)
+    if real is not None:
+        from swarmloc.bench.reproduce.sim_to_real import render_sim_to_real
+
+        text += "\n" + "\n".join(render_sim_to_real(real)) + "\n"
+    write_text_atomic(out_md, text)
     return doc

@@ -9,7 +9,7 @@ swarm size or a contamination percentage), which leaves the task's *base* name::
 
 ``FAMILY_OF_BASE`` then names the family of each base (NLOS and NLOSStep are one family,
 VisionLoss and Indoor are the pf-nn scenarios, UTILFlight and the UTIL TDOA flights are the real
-flight data, TDOA the simulated TDOA room). A base
+flight data, TDOA the simulated TDOA room, AnchorNLOS benchmark v2's one-UAV anchor NLOS). A base
 missing from the table is a family of its own, so a new task never disappears from a view.
 This module is the one place that defines families; everything that groups tasks imports it.
 """
@@ -35,6 +35,7 @@ FAMILY_OF_BASE: dict[str, str] = {
     "AnchorFree": "AnchorFree",
     "UTILFlight": "Real",
     "TDOA": "TDOA",
+    "AnchorNLOS": "AnchorNLOS",
     # the real UTIL TDOA flights (``tasks.UTIL_TDOA_FLIGHTS``)
     **{base: "Real" for base in (
         "UTILC0425Tdoa2Los", "UTILC0425Tdoa3Los", "UTILC0426Tdoa2NoLabel", "UTILC0426Tdoa2Wood",
@@ -44,7 +45,7 @@ FAMILY_OF_BASE: dict[str, str] = {
 
 #: display order of the families (one not listed here comes after these, in order of appearance)
 FAMILY_ORDER: tuple[str, ...] = (
-    "Ideal", "NLOS", "Scale", "Cascaded", "Vision", "Hybrid", "Gradual", "AnchorFree", "TDOA", "Real",
+    "Ideal", "NLOS", "Scale", "Cascaded", "Vision", "Hybrid", "Gradual", "AnchorFree", "AnchorNLOS", "TDOA", "Real",
 )
 
 _VERSION = re.compile(r"-v\d+$")

@@ -1,7 +1,7 @@
 """The v2 tasks of benchmark v2: tasks where cooperation carries information, in two tracks.
 
 Benchmark v1 measured the double counting of a CEKF that fuses a neighbour's estimate as a
-known point (DESIGN.md, "Benchmark v2"). Every v2 task fuses its peers by split covariance
+known point (docs/benchmark-v2.md). Every v2 task fuses its peers by split covariance
 intersection (``FilterSettings.peer_update = "split_ci"``: consistent, all of a step's peers
 in one update), and names its board (``TaskSpec.track``):
 
@@ -20,8 +20,10 @@ admission criteria on dev seeds (``docs/calibration-v2.json``), and a task that 
 registered with its reason.
 
 Every parameter has its physical source in the factory's docstring; none is chosen to make
-a method win. The NLOS process of the v2 tasks (``NLOS_V2``) is v1's indoor process on anchor
-and peer links, one state per link.
+a method win. The NLOS process of the two-way-ranging v2 tasks (``NLOS_V2``) is the Gauss–Markov process
+fitted to the UTIL obstacle flight's residuals (``nlos_fit_values.UTIL_NLOS_TWR``; ``swarmloc reproduce
+nlos-fit``), on anchor and peer links, with one state per peer link (one exchange, one obstruction); the
+simulated TDOA room's is the fit to the UTIL TDOA flights (``UTIL_NLOS_TDOA``).
 """
 
 from __future__ import annotations
@@ -29,13 +31,20 @@ from __future__ import annotations
 from typing import Callable
 
 from swarmloc.envs.tasks.catalogue import EIGHT_ANCHORS, ideal, scale, tdoa
+from swarmloc.envs.tasks.nlos_fit_values import UTIL_NLOS_TDOA, UTIL_NLOS_TWR
 from swarmloc.envs.tasks.specs import NlosGaussMarkov, TaskSpec, VisionOutage
-from swarmloc.envs.tasks.v1 import (INDOOR_NLOS, NLOS_SHIFTED_RANGES, NLOS_TRAIN_RANGES, cascaded_fault_random_shifted_v1,
-                                    cascaded_fault_random_v1, cascaded_fault_v1, vision_loss_random_shifted_v1,
-                                    vision_loss_random_v1, vision_loss_v1)
+from swarmloc.envs.tasks.v1 import (cascaded_fault_random_shifted_v1, cascaded_fault_random_v1, cascaded_fault_v1,
+                                    vision_loss_random_shifted_v1, vision_loss_random_v1, vision_loss_v1)
 
-#: the NLOS process of the v2 tasks (module docstring)
-NLOS_V2 = dict(INDOOR_NLOS)
+#: the NLOS process of the two-way-ranging v2 tasks: the UTIL TWR fit, one state per peer link (module docstring)
+NLOS_V2 = {**UTIL_NLOS_TWR, "peer_state": "per_link"}
+#: the randomized variants' draws per episode: onset rate uniform and mean bias log-uniform between the two UTIL
+#: fits (TWR: 1.0 /s around a near-zero mean, the heavy tail of a cluttered lab; TDOA: 0.22 /s around 0.52 m, the
+#: obstacle episodes behind wood, plastic and metal), and three links in four NLOS-prone
+NLOS_V2_TRAIN = dict(onset_rate_range=(0.2, 1.0), mean_bias_range=(0.01, 0.5), link_fraction=0.75)
+#: the shifted split: denser and larger biases than either UTIL fit (every link prone, 1–2 onsets per second,
+#: mean bias 0.5–1.5 m: a hall cluttered with metal)
+NLOS_V2_SHIFTED = dict(onset_rate_range=(1.0, 2.0), mean_bias_range=(0.5, 1.5), link_fraction=1.0)
 #: UWB two-way ranging reaches an anchor within this distance in the v2 Scale hall: a DW1000 at
 #: its 6.8 Mb/s indoor setting holds a reliable link to about 10–15 m through a cluttered hall;
 #: 11 m reaches the near-wall anchors from anywhere on the 6 m circle and none across the hall
@@ -62,7 +71,10 @@ def _v2(base: TaskSpec, track: str, **changes) -> TaskSpec:
 
 def _nlos(targets: tuple[str, ...], **ranges) -> dict:
     """The v2 NLOS process on ``targets`` (with ``ranges``: its randomized draws), as a ``faults`` dict."""
-    return {"nlos_gauss_markov": NlosGaussMarkov(targets=targets, **{**NLOS_V2, **ranges}).model_dump()}
+    params = {**NLOS_V2, **ranges}
+    if "peer" not in targets:
+        params.pop("peer_state")
+    return {"nlos_gauss_markov": NlosGaussMarkov(targets=targets, **params).model_dump()}
 
 
 # --------------------------------------------------------------------------- cooperative
@@ -79,22 +91,23 @@ def scale_v2(n: int) -> Callable[[], TaskSpec]:
     ranged only within {SCALE_ANCHOR_RANGE:g} m (``SCALE_ANCHOR_RANGE``), so a UAV sees the anchors
     of its side of the hall and learns the rest from the UAVs across the circle: the peers carry
     information (with every peer removed the bound rises; ``docs/calibration-v2.json``). And the
-    indoor NLOS process (``NLOS_V2``) acts on anchor and peer links alike, one state per link.
+    NLOS process fitted to the UTIL obstacle flight (``NLOS_V2``) acts on anchor and peer links alike,
+    one state per peer link.
     """
     return make
 
 
 def scale_random_v2() -> TaskSpec:
-    """Scale8-v2 with the NLOS onset rate, mean bias and prone links drawn per episode (v1's training ranges)."""
+    """Scale8-v2 with the NLOS onset rate, mean bias and prone links drawn per episode (``NLOS_V2_TRAIN``)."""
     base = scale_v2(8)()
-    return _v2(base, "cooperative", name="ScaleRandom", faults=_nlos(("anchor", "peer"), **NLOS_TRAIN_RANGES))
+    return _v2(base, "cooperative", name="ScaleRandom", faults=_nlos(("anchor", "peer"), **NLOS_V2_TRAIN))
 
 
 def scale_random_shifted_v2() -> TaskSpec:
-    """ScaleRandom-v2 shifted: sixteen UAVs instead of eight and more links biased at once (v1's shifted ranges)."""
+    """ScaleRandom-v2 shifted: sixteen UAVs instead of eight, denser and larger biases (``NLOS_V2_SHIFTED``)."""
     base = scale_v2(16)()
     return _v2(base, "cooperative", name="ScaleRandomShifted",
-               faults=_nlos(("anchor", "peer"), **NLOS_SHIFTED_RANGES))
+               faults=_nlos(("anchor", "peer"), **NLOS_V2_SHIFTED))
 
 
 def _with_top_anchor(base: TaskSpec) -> tuple:
@@ -160,11 +173,11 @@ def vision_loss_random_shifted_v2() -> TaskSpec:
 
 
 def anchor_nlos_v2() -> TaskSpec:
-    """One UAV on the Ideal course among the eight anchors of NLOS-v1, its anchor links under the indoor NLOS process.
+    """One UAV on the Ideal course among the eight anchors of NLOS-v1, its anchor links under the UTIL-fitted NLOS.
 
     The single-UAV board: no peers, so what a method gains is what it makes of eight anchor
-    ranges (σ 0.15 m) of which several are biased at once (``NLOS_V2``; the UTIL obstacle
-    residuals), with a 0.1 m/s² IMU.
+    ranges (σ 0.15 m) under the NLOS process fitted to the UTIL obstacle flight (``NLOS_V2``),
+    with a 0.1 m/s² IMU.
     """
     base = ideal()
     return _v2(base, "robust-ranging", name="AnchorNLOS", n_uav=1, anchors=EIGHT_ANCHORS,
@@ -172,24 +185,28 @@ def anchor_nlos_v2() -> TaskSpec:
 
 
 def anchor_nlos_random_v2() -> TaskSpec:
-    """AnchorNLOS-v2 with the NLOS onset rate, mean bias and prone anchors drawn per episode (v1's training ranges)."""
+    """AnchorNLOS-v2 with the NLOS onset rate, mean bias and prone anchors drawn per episode (``NLOS_V2_TRAIN``)."""
     return _v2(anchor_nlos_v2(), "robust-ranging", name="AnchorNLOSRandom", faults=_nlos(("anchor",),
-                                                                                        **NLOS_TRAIN_RANGES))
+                                                                                        **NLOS_V2_TRAIN))
 
 
 def anchor_nlos_random_shifted_v2() -> TaskSpec:
-    """AnchorNLOSRandom-v2 shifted: every anchor NLOS-prone and onsets 0.12–0.20 /s (v1's shifted ranges)."""
+    """AnchorNLOSRandom-v2 shifted: every anchor NLOS-prone, denser and larger biases (``NLOS_V2_SHIFTED``)."""
     return _v2(anchor_nlos_v2(), "robust-ranging", name="AnchorNLOSRandomShifted",
-               faults=_nlos(("anchor",), **NLOS_SHIFTED_RANGES))
+               faults=_nlos(("anchor",), **NLOS_V2_SHIFTED))
 
 
 def tdoa_v2() -> TaskSpec:
-    """TDOA-v1's room (eight anchors, TDOA2 ring pairs, packet loss, pair NLOS) flown by one UAV.
+    """TDOA-v1's room (eight anchors, TDOA2 ring pairs, packet loss) flown by one UAV, its pair NLOS fitted to UTIL.
 
     The simulated counterpart of the real UTIL TDOA flights (one Crazyflie each): the UAV on
-    the 1.0 m circle, everything else as TDOA-v1.
+    the 1.0 m circle, and the NLOS process of each anchor pair the one fitted to the UTIL TDOA
+    flights among obstacles (``UTIL_NLOS_TDOA``: 0.22 onsets per second, episodes of about 1 s,
+    mean 0.52 m, σ 0.85 m, τ 0.17 s) instead of TDOA-v1's hand-chosen one; everything else as TDOA-v1.
     """
-    return _v2(tdoa(), "robust-ranging", n_uav=1)
+    return _v2(tdoa(), "robust-ranging", n_uav=1, faults={
+        **tdoa().faults.model_dump(), "nlos_gauss_markov": NlosGaussMarkov(targets=("anchor",),
+                                                                           **UTIL_NLOS_TDOA).model_dump()})
 
 
 #: registered ID → spec factory, the v2 tasks (``tasks.CATALOGUE`` includes them)
@@ -209,9 +226,9 @@ CATALOGUE_V2: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/TDOA-v2": tdoa_v2,
 }
 
-_SCALE_HISTORY = ("v2: anchors ranged within 11 m and the indoor NLOS process on anchor and peer links (one state "
-                  "per link), peers fused by split covariance intersection (benchmark v2: the peers carry "
-                  "information).")
+_SCALE_HISTORY = ("v2: anchors ranged within 11 m and the NLOS process fitted to the UTIL obstacle flight on anchor "
+                  "and peer links (one state per peer link), peers fused by split covariance intersection "
+                  "(benchmark v2: the peers carry information).")
 #: the Version History line of each v2 task (task_envs adds it)
 HISTORY_V2: dict[str, str] = {
     **{f"swarmloc/Scale{n}-v2": _SCALE_HISTORY for n in SCALE_SIZES},
@@ -226,5 +243,6 @@ HISTORY_V2: dict[str, str] = {
        for task in ("swarmloc/VisionLoss-v2", "swarmloc/VisionLossRandom-v2", "swarmloc/VisionLossRandomShifted-v2")},
     **{task: "v2: new, the robust-ranging board's simulated anchor NLOS (one UAV)."
        for task in ("swarmloc/AnchorNLOS-v2", "swarmloc/AnchorNLOSRandom-v2", "swarmloc/AnchorNLOSRandomShifted-v2")},
-    "swarmloc/TDOA-v2": "v2: one UAV (the robust-ranging board) instead of four without peers.",
+    "swarmloc/TDOA-v2": "v2: one UAV (the robust-ranging board) instead of four without peers, and the pair NLOS "
+                        "process fitted to the UTIL TDOA flights.",
 }
