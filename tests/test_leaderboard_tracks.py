@@ -150,7 +150,7 @@ def test_the_front_page_shows_each_track_with_its_figures(tmp_path: Path) -> Non
     site = tmp_path / "site"
     positions = []
     for track in ("cooperative", "robust-ranging"):
-        section = re.search(rf'<section class="track" id="track-tiny-v2-1-{track}">(.*?)</section>', page, re.S)
+        section = re.search(rf'<section class="track" id="track-tiny-v2-1-{track}">(.*?)</section>', page, re.DOTALL)
         assert section is not None, track
         positions.append(section.start())
         for name in FIGURES:

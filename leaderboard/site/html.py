@@ -444,7 +444,7 @@ def _draw_track_plots(boards: dict[str, SuiteBoard], plots_dir: Path) -> list[Tr
     for track, board in boards.items():
         try:
             sections.append(track_plots(board, track, plots_dir / track))
-        except Exception as err:  # a broken plot must not take the site down
+        except Exception as err:  # noqa: BLE001 - a broken plot must not take the site down
             warnings.warn(f"plots of {board.name} v{board.version}, track {track}, failed: {err}", stacklevel=2)
             sections.append(TrackSection(track, board, ()))
     return sections

@@ -28,8 +28,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib import ticker
 
-from swarmloc.bench.scoring.families import group_by_family, task_label
 from swarmloc.bench.reports.method_style import method_styles
+from swarmloc.bench.scoring.families import group_by_family, task_label
 from swarmloc.bench.scoring.profiles import performance_profile
 from swarmloc.leaderboard.site.ranking import Standing, SuiteBoard, fmt_pct, fmt_times
 
