@@ -102,3 +102,18 @@ def test_batched_equals_single_runs_exactly(task_id):
         single = rollout(task_id, [seed], 30)
         for key, value in single.items():
             assert np.array_equal(batched[key][:, b], value[:, 0]), f"{key} differs for seed {seed}"
+
+
+def test_v1_tasks_are_deprecated_through_gymnasiums_warning_and_v2_and_real_flights_are_not():
+    import warnings
+
+    from swarmloc.envs.adapters.trust_env import build_spec
+
+    with pytest.warns(DeprecationWarning, match="swarmloc/NLOS-v1 is a benchmark v1 task, frozen and deprecated"):
+        build_spec("NLOS-v1", {})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        build_spec("swarmloc/Scale8-v2", {})
+        build_spec("swarmloc/UTILFlight-v1", {})  # a real flight: the robust-ranging track's, not deprecated
+    with pytest.raises(TypeError, match="unknown argument.*'track'"):
+        build_spec("swarmloc/Scale8-v2", {"track": "robust-ranging"})

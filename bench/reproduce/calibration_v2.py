@@ -23,8 +23,9 @@ f. *ceiling valid*: no non-privileged method below the bound, the oracle no wors
 g. *nothing degenerate*: ``random`` ≥ 10 % worse than the best method
    (``calibration_criteria.not_degenerate``).
 
-A task passes when every criterion that applies to its track passes (a criterion that does not
-apply is reported with ``pass`` null and does not count); it is then ``in_headline``. Beside the
+A task passes when every criterion that applies to it passes; it is then ``in_headline``. A row's
+``criteria`` hold the criteria that apply (name → ``value``, ``pass``, ``measured``), its ``not_applicable``
+the others with the reason (a and e on the robust-ranging track, b and d on a task without faults). Beside the
 criteria each row gives the task means the report's tables read (uniform, oracle,
 non-cooperative, centralized-oracle, the bounds), so the per-family uniform/bound and oracle/bound
 ratios come from the same runs.
@@ -240,6 +241,9 @@ def build_rows(numbers: Mapping[str, Mapping[str, Any]], seeds: Sequence[int],
                      "rmse_faults_off": {k: round(float(np.mean(v)), 4) for k, v in m["off"].items()}})
     verdicts = track_headroom(rows)
     for r in rows:
+        # a row holds the criteria that apply to its task; the others, with why, beside them
+        r["not_applicable"] = {name: c["measured"] for name, c in r["criteria"].items() if c["pass"] is None}
+        r["criteria"] = {name: c for name, c in r["criteria"].items() if c["pass"] is not None}
         r["in_headline"] = admitted(r["criteria"])
         r["failing"] = [name for name, c in r["criteria"].items() if c["pass"] is False]
     return rows, verdicts
@@ -297,7 +301,8 @@ def render(rows: Sequence[Mapping[str, Any]], verdicts: Mapping[str, Any], famil
         for r in mine:
             c, m = r["criteria"], r["rmse"]
             nc = f"{m['non-cooperative']:.3f}" if "non-cooperative" in m else "—"
-            cells = [_cell({**c[k], "pass": c[k]["task_pass"]} if k == "headroom" else c[k]) for k in CRITERIA]
+            cells = ["·" if k not in c else _cell({**c[k], "pass": c[k]["task_pass"]} if k == "headroom" else c[k])
+                     for k in CRITERIA]
             lines.append(f"| {task_label(r['task'])} | " + " | ".join(cells)
                          + f" | {m['uniform']:.3f} | {nc} | {m['oracle']:.3f} | {m[CENTRAL]:.3f} | "
                          f"{r['bound']['on']:.3f} | {'**yes**' if r['in_headline'] else 'no: ' + ', '.join(r['failing'])} |")

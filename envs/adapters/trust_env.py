@@ -17,6 +17,7 @@ import warnings
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from gymnasium import logger
 from gymnasium.utils import seeding
 
 from swarmloc.envs.world.core import CoreStep, LinkTrustCore
@@ -25,14 +26,14 @@ from swarmloc.envs.world.observation import N_FEATURES, build_observation, kind_
 from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward, team_reward
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.tasks.seeds import SEED_BOUND
-from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
+from swarmloc.envs.tasks.catalogue import CATALOGUE, canonical_task_id, get_spec
 
 #: reward terms reported per UAV in every adapter's info (names of ``RewardTerms`` fields)
 REWARD_TERMS = ("accuracy", "delay_penalty", "energy_penalty", "jitter_penalty", "flops", "delay_ms", "energy_j")
 #: every per-UAV info entry: the UAV's own reward, each term, and the position error [m]
 INFO_KEYS = ("uav_reward",) + REWARD_TERMS + ("position_error",)
 #: spec fields a task's identity is made of; overriding them would make another task
-_IDENTITY_FIELDS = ("name", "version")
+_IDENTITY_FIELDS = ("name", "version", "track")
 
 
 def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
@@ -46,8 +47,15 @@ def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
         UnknownTaskError: unknown task ID (the message lists the known ones).
         TypeError: an override is not a TaskSpec field (the message lists the allowed ones).
         pydantic.ValidationError: an override value is out of range.
+
+    Warns:
+        DeprecationWarning: a benchmark v1 task (frozen and deprecated: the v2 tasks measure cooperation on a
+            consistent backbone), through Gymnasium's logger as its own out-of-date notice.
     """
-    canonical_task_id(task_id)
+    task_id = canonical_task_id(task_id)
+    if task_id.endswith("-v1") and CATALOGUE[task_id]().trajectory.kind != "recorded":
+        logger.deprecation(f"{task_id} is a benchmark v1 task, frozen and deprecated: v1's CEKF fuses a neighbour's "
+                           "estimate as a known point and double counts. Use the -v2 tasks (docs/benchmark-v2.md).")
     allowed = sorted(set(TaskSpec.model_fields) - set(_IDENTITY_FIELDS))
     unknown = sorted(set(overrides) - set(allowed))
     if unknown:
