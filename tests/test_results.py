@@ -57,7 +57,7 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
 
 def test_older_schema_reads_its_missing_metrics_as_null() -> None:
     raw = json.loads(R.dumps_results(_results()))
-    assert raw["schema_version"] == R.SCHEMA_VERSION == 4
+    assert raw["schema_version"] == R.SCHEMA_VERSION == 5
     raw["schema_version"] = 2
     for name in ("recovery_s", "recovered"):
         for episode in raw["episodes"]:
@@ -133,7 +133,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None
         (b"\xff\xfe garbage", "not UTF-8"),
         (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
-        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3, 4 \\(the file was written by a newer swarmloc: upgrade"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3, 4, 5 \\(the file was written by a newer swarmloc: upgrade"),
     ],
 )
 def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:

@@ -3,7 +3,7 @@
 One JSON document per (method, suite) evaluation, with exactly this top-level shape::
 
     {
-      "schema_version": 4,
+      "schema_version": 5,
       "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
       "suite":      {"name", "version", "sha256"},
       "provenance": {"package_version", "git_commit", "created_utc",
@@ -12,7 +12,9 @@ One JSON document per (method, suite) evaluation, with exactly this top-level sh
       "episodes":   [{"task", "seed", "metrics": {<every name in METRIC_NAMES>: float | null}}],
       "aggregates": {"<task id>": {"<metric>": {"mean", "iqm", "ci_low", "ci_high"} | null}},
       "score":      {"S", "ci_low", "ci_high", "times", "iqm", "gap_closed", "covered", "total",
-                     "tasks": {"<task id>": {"gain", "achievable", "gap_closed"}}} | null
+                     "tasks": {"<task id>": {"gain", "achievable", "gap_closed"}},
+                     "tracks": {"<track>": {"S", "ci_low", "ci_high", "times", "iqm", "gap_closed",
+                                            "covered", "total"}} | null} | null
     }
 
 A metric a task does not define (``fault_rmse`` on a fault-free task, say) is ``null``.
@@ -47,18 +49,19 @@ from pydantic import (
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
 
-SCHEMA_VERSION: Literal[4] = 4
+SCHEMA_VERSION: Literal[5] = 5
 """Version of the results-file schema written by this module; bump on any change.
 
 Version history: 1 — the first metrics, ``normalized_score`` among them; 2 — adds
 ``uniform_rmse`` (the standard CEKF on the same episode, the reference of the score) and
 ``bound_rmse`` (the episode's information bound); 3 — adds ``recovery_s`` and ``recovered``
 (the faulty UAVs' recovery after an IMU fault); 4 — drops ``normalized_score`` (the retired
-score against the oracle of the old fault labels).
+score against the oracle of the old fault labels); 5 — the ``score`` block adds ``tracks``, a
+benchmark v2 suite's score per track (null for other suites and in older files).
 """
 #: schema versions this module reads (an older file reads with the metrics it lacks null,
 #: and without the retired ones)
-READABLE_SCHEMA_VERSIONS = (1, 2, 3, 4)
+READABLE_SCHEMA_VERSIONS = (1, 2, 3, 4, 5)
 
 METRIC_NAMES: tuple[str, ...] = (
     "rmse",
@@ -89,6 +92,7 @@ SCHEMA_METRICS: dict[int, tuple[str, ...]] = {
     2: METRIC_NAMES[:METRIC_NAMES.index("recovery_s")],
     3: METRIC_NAMES,
     4: METRIC_NAMES,
+    5: METRIC_NAMES,
 }
 """The current metrics a results file of each schema version holds (the others read as null)."""
 
@@ -225,6 +229,29 @@ class TaskScoreBlock(BaseModel):
     gap_closed: float | None
 
 
+class TrackScoreBlock(BaseModel):
+    """The score on one track of a benchmark v2 suite: its tasks scored as a suite of their own (score v2).
+
+    Attributes:
+        S, ci_low, ci_high: the track's score (families weigh equally) and its hierarchical-bootstrap 95 % CI.
+        times: ``2^S``.
+        iqm: interquartile mean of the track's covered episodes' gains.
+        gap_closed: as the file's, over the track's tasks (null if none has one).
+        covered, total: the track's tasks covered and evaluated.
+    """
+
+    model_config = _FROZEN
+
+    S: float
+    ci_low: float
+    ci_high: float
+    times: float
+    iqm: float
+    gap_closed: float | None
+    covered: int = Field(ge=0)
+    total: int = Field(ge=1)
+
+
 class ScoreBlock(BaseModel):
     """The score of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
 
@@ -236,6 +263,10 @@ class ScoreBlock(BaseModel):
         gap_closed: mean over tasks of their gap closed (null if no task has one).
         covered, total: tasks covered and tasks evaluated.
         tasks: per covered task.
+        tracks: a benchmark v2 suite's score per track, headline first (scores never mix tracks: the
+            boards rank by these, and ``S`` above spans every task the file ran); a track the method
+            covers no task of is absent. Null for other suites. No cooperation gain: it needs
+            ``non-cooperative``'s RMSE per episode, which a file of another method does not hold.
     """
 
     model_config = _FROZEN
@@ -249,23 +280,35 @@ class ScoreBlock(BaseModel):
     covered: int = Field(ge=0)
     total: int = Field(ge=1)
     tasks: dict[str, TaskScoreBlock]
+    tracks: dict[str, TrackScoreBlock] | None = None
 
 
 def score_block(episodes: Sequence[Episode], tasks: Sequence[str], suite: str | None = None) -> ScoreBlock | None:
     """The ``score`` block of a results file (None without ``uniform_rmse``, e.g. a version-1 file).
 
-    ``suite`` (the suite's name) picks score v1 or v2 (``swarmloc.bench.scoring.score.score_version``).
+    ``suite`` (the suite's name) picks score v1 or v2 (``swarmloc.bench.scoring.score.score_version``);
+    a v2 suite's block also holds the score of each track its tasks fall into
+    (``swarmloc.bench.scoring.tracks.track_scores``).
     """
-    from swarmloc.bench.scoring.score import suite_score  # local: score imports stats, stats this module
+    # local: score imports stats, stats this module; tracks reads the task catalogue
+    from swarmloc.bench.scoring.score import score_version, suite_score
+    from swarmloc.bench.scoring.tracks import named_tracks, registered_track, track_scores
 
-    s = suite_score([e.model_dump() for e in episodes], list(tasks), suite=suite)
+    dumped = [e.model_dump() for e in episodes]
+    s = suite_score(dumped, list(tasks), suite=suite)
     if s is None:
         return None
     k, n = s.coverage
     tasks_block = {t: TaskScoreBlock(gain=v.mean, achievable=v.achievable, gap_closed=v.gap_closed)
                    for t, v in s.tasks.items()}
+    tracks_block = None
+    if score_version(suite) >= 2 and named_tracks(tasks):
+        per_track = track_scores(dumped, list(tasks), suite=suite, track_of=registered_track)  # unregistered: no track
+        tracks_block = {track: TrackScoreBlock(S=t.S, ci_low=t.ci_low, ci_high=t.ci_high, times=t.times, iqm=t.iqm,
+                                               gap_closed=t.gap_closed, covered=t.coverage[0], total=t.coverage[1])
+                        for track, t in per_track.items() if track is not None and t is not None}
     return ScoreBlock(S=s.S, ci_low=s.ci_low, ci_high=s.ci_high, times=s.times, iqm=s.iqm, gap_closed=s.gap_closed,
-                      covered=k, total=n, tasks=tasks_block)
+                      covered=k, total=n, tasks=tasks_block, tracks=tracks_block)
 
 
 class Results(BaseModel):
@@ -273,7 +316,7 @@ class Results(BaseModel):
 
     model_config = _FROZEN
 
-    schema_version: Literal[1, 2, 3, 4] = SCHEMA_VERSION
+    schema_version: Literal[1, 2, 3, 4, 5] = SCHEMA_VERSION
     method: MethodInfo
     suite: SuiteInfo
     provenance: Provenance
@@ -589,6 +632,7 @@ __all__ = [
     "ScoreBlock",
     "SuiteInfo",
     "TaskScoreBlock",
+    "TrackScoreBlock",
     "collect_provenance",
     "dumps_results",
     "load_results",

@@ -14,6 +14,13 @@ cancels as uniform's does), so one verdict serves both.
 Both files ran one suite, or part of it (``--tasks``: ``<suite>-subset``). Only episodes
 both files hold are compared, and only tasks both methods cover (a null RMSE
 on a seed leaves the task out, as on the leaderboard); what was left out is listed.
+
+**Tracks.** A v2 suite's tasks fall into tracks, each its own board, and scores never mix tracks
+(:mod:`swarmloc.bench.scoring.tracks`). The verdict is the leaderboard's rank criterion (the paired
+CI of ``S_B − S_A``), so it is given per track, as the boards rank: :func:`compare_tracks` (what
+``swarmloc compare`` prints) compares each track on its own tasks and families, and
+:func:`compare` refuses files whose tasks span two tracks unless told which one (``track=``), so no
+caller gets a number that mixes them. A v1 suite, or tasks of one track, compare as one.
 """
 
 from __future__ import annotations
@@ -31,8 +38,14 @@ from swarmloc.bench.scoring.score import (
     PairedDifference,
     SuiteScore,
     paired_difference,
+    score_version,
     suite_score,
 )
+from swarmloc.bench.scoring.tracks import TrackOf, named_tracks, registered_track
+
+
+class NothingToCompare(ValueError):
+    """The two files (or one track of them) share no task both methods cover."""
 
 
 @dataclass(frozen=True)
@@ -66,6 +79,7 @@ class Comparison:
         p_improvement: ``P(B > A)`` (rliable; per task over all seed pairs, mean over tasks).
         tasks: per task, in the order of A's file.
         left_out: tasks not compared, each with the reason.
+        track: the v2 track compared (its tasks only); None for a v1 suite or untracked tasks.
     """
 
     name_a: str
@@ -77,6 +91,7 @@ class Comparison:
     p_improvement: float
     tasks: tuple[TaskComparison, ...]
     left_out: tuple[tuple[str, str], ...]
+    track: str | None = None
 
     @property
     def b_ahead(self) -> bool:
@@ -89,11 +104,12 @@ def _base_suite(name: str) -> str:
     return name.removesuffix("-subset")
 
 
-def _episodes_by_task(results: Results) -> dict[str, dict[int, dict]]:
-    """task → seed → the episode as plain data (``{"task", "seed", "metrics"}``)."""
+def _episodes_by_task(results: Results, tasks: set[str] | None = None) -> dict[str, dict[int, dict]]:
+    """task → seed → the episode as plain data (``{"task", "seed", "metrics"}``), of ``tasks`` only when given."""
     out: dict[str, dict[int, dict]] = {}
     for e in results.episodes:
-        out.setdefault(e.task, {})[e.seed] = e.model_dump()
+        if tasks is None or e.task in tasks:
+            out.setdefault(e.task, {})[e.seed] = e.model_dump()
     return out
 
 
@@ -115,25 +131,48 @@ def _check_same_world(task: str, seeds: Sequence[int], rows_a: dict, rows_b: dic
                              "not run the same episode (a task or filter changed between them)")
 
 
-def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> Comparison:
-    """Compare results B against results A, paired on the episodes both hold.
+def _tracks_of(a: Results, b: Results, track_of: TrackOf) -> dict[str, list[str]]:
+    """The v2 tracks the two files' tasks fall into (none for a v1 suite: one board)."""
+    if score_version(_base_suite(a.suite.name)) < 2:
+        return {}
+    return named_tracks(dict.fromkeys(e.task for results in (a, b) for e in results.episodes), track_of)
+
+
+def compare(a: Results, b: Results, *, track: str | None = None, track_of: TrackOf = registered_track,
+            n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> Comparison:
+    """Compare results B against results A, paired on the episodes both hold (one track of a v2 suite).
 
     Args:
         a: the reference (baseline) results.
         b: the results compared with it.
+        track: of a v2 suite whose tasks span several tracks, the one to compare (its tasks only);
+            None: the files' only track, or every task of a v1 suite.
+        track_of: task → track (default: the registered spec's; None for an unregistered task).
         n_resamples, seed: of the paired bootstrap.
 
     Returns:
-        The comparison; ``left_out`` names every task of either file that was not compared.
+        The comparison; ``left_out`` names every task of either file (of the track) that was not compared.
 
     Raises:
         ValueError: the files ran different suites or different episodes under one (task, seed)
-            (their uniform RMSE differ), or share no task both methods cover.
+            (their uniform RMSE differ); their tasks span tracks and ``track`` is None, or ``track``
+            is not one of theirs.
+        NothingToCompare: they share no task both methods cover (on the track).
     """
     if _base_suite(a.suite.name) != _base_suite(b.suite.name):
         raise ValueError(f"the results ran different suites ({a.suite.name!r} and {b.suite.name!r}); "
                          "only the same episodes compare")
-    rows_a, rows_b = _episodes_by_task(a), _episodes_by_task(b)
+    tracks = _tracks_of(a, b, track_of)
+    if track is None and len(tracks) > 1:
+        raise ValueError(f"the files' tasks span the tracks {', '.join(tracks)} of {_base_suite(a.suite.name)}, and "
+                         "scores never mix tracks (one board each): compare one (track=...) or each with "
+                         "compare_tracks, as swarmloc compare does")
+    if track is not None and track not in tracks:
+        raise ValueError(f"track {track!r} is not among the files' tracks; allowed: {list(tracks)}")
+    members = None if track is None else set(tracks[track])
+    if track is None and tracks and set(next(iter(tracks.values()))) >= {e.task for e in (*a.episodes, *b.episodes)}:
+        track = next(iter(tracks))  # every task on one track: name the board (untracked tasks keep it None)
+    rows_a, rows_b = _episodes_by_task(a, members), _episodes_by_task(b, members)
     left_out: list[tuple[str, str]] = []
     kept_a, kept_b, seeds_of = [], [], {}
     for task in list(rows_a) + [t for t in rows_b if t not in rows_a]:
@@ -154,7 +193,9 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
         kept_b += [rows_b[task][s] for s in seeds]
     names = list(seeds_of)
     if not names:
-        raise ValueError(f"{a.method.name!r} and {b.method.name!r} share no covered task; left out: {left_out}")
+        on = "" if track is None else f" on the {track} track"
+        raise NothingToCompare(f"{a.method.name!r} and {b.method.name!r} share no covered task{on}; "
+                               f"left out: {left_out}")
     # the suite picks the score (score.score_version): a v2 suite's verdict resamples families, then seeds
     score_a, score_b = (suite_score(kept, names, suite=_base_suite(a.suite.name)) for kept in (kept_a, kept_b))
     assert score_a is not None and score_b is not None  # every kept task is covered by both
@@ -165,10 +206,57 @@ def compare(a: Results, b: Results, *, n_resamples: int = DEFAULT_RESAMPLES, see
                           for rows in (rows_a, rows_b))
         tasks.append(TaskComparison(task, rmse_a, rmse_b, score_a.tasks[task].mean, score_b.tasks[task].mean,
                                     task_diffs[task]))
+    # P(B > A) weighs tasks as the score does: families equally under score v2 (none under v1: tasks equally)
     p = probability_of_improvement({t: s.gains for t, s in score_b.tasks.items()},
-                                   {t: s.gains for t, s in score_a.tasks.items()})
+                                   {t: s.gains for t, s in score_a.tasks.items()}, families=score_b.families)
     return Comparison(a.method.name, b.method.name, a.suite.name, score_a, score_b, suite_diff, p, tuple(tasks),
-                      tuple(left_out))
+                      tuple(left_out), track)
+
+
+@dataclass(frozen=True)
+class TrackComparisons:
+    """B against A on each board: per track of a v2 suite, or once for a v1 suite.
+
+    Attributes:
+        comparisons: track → its comparison, ``TRACKS`` order (the headline first); the one key
+            None for a v1 suite (or tasks without a track).
+        not_compared: tracks with no task both methods cover, and a v2 suite's tasks without a
+            track, each with the reason.
+    """
+
+    comparisons: dict[str | None, Comparison]
+    not_compared: tuple[tuple[str, str], ...] = ()
+
+
+def compare_tracks(a: Results, b: Results, *, track_of: TrackOf = registered_track,
+                   n_resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED) -> TrackComparisons:
+    """:func:`compare` on every track the files' tasks fall into: one verdict per board.
+
+    Args:
+        a, b, track_of, n_resamples, seed: as :func:`compare`.
+
+    Raises:
+        ValueError: as :func:`compare` (different suites or episodes).
+        NothingToCompare: no track has a task both methods cover.
+    """
+    tracks = _tracks_of(a, b, track_of)
+    if len(tracks) < 2:  # a v1 suite, or one track: one board
+        comparison = compare(a, b, track_of=track_of, n_resamples=n_resamples, seed=seed)
+        return TrackComparisons({comparison.track: comparison})
+    out: dict[str | None, Comparison] = {}
+    not_compared: list[tuple[str, str]] = []
+    for track in tracks:
+        try:
+            out[track] = compare(a, b, track=track, track_of=track_of, n_resamples=n_resamples, seed=seed)
+        except NothingToCompare as err:
+            not_compared.append((track, str(err)))
+    tracked = {t for members in tracks.values() for t in members}
+    untracked = dict.fromkeys(e.task for results in (a, b) for e in results.episodes if e.task not in tracked)
+    not_compared += [(task, "no track: on no board of the suite") for task in untracked]
+    if not out:
+        raise NothingToCompare(f"{a.method.name!r} and {b.method.name!r} share no covered task on any track: "
+                               + "; ".join(why for _, why in not_compared))
+    return TrackComparisons(out, tuple(not_compared))
 
 
 def _difference_dict(d: PairedDifference) -> dict:
@@ -176,9 +264,10 @@ def _difference_dict(d: PairedDifference) -> dict:
 
 
 def comparison_dict(c: Comparison) -> dict:
-    """The comparison as plain JSON data (gains in log2 units over uniform, RMSE in metres)."""
+    """The comparison as plain JSON data (gains in log2 units over uniform, RMSE in metres); ``track`` only
+    for a v2 track's comparison."""
     return {
-        "suite": c.suite, "a": c.name_a, "b": c.name_b,
+        "suite": c.suite, "a": c.name_a, "b": c.name_b, **({} if c.track is None else {"track": c.track}),
         "score": {name: {"S": s.S, "ci": [s.ci_low, s.ci_high], "times": s.times}
                   for name, s in (("a", c.score_a), ("b", c.score_b))},
         "difference": _difference_dict(c.difference), "b_ahead": c.b_ahead, "p_improvement": c.p_improvement,
@@ -186,3 +275,14 @@ def comparison_dict(c: Comparison) -> dict:
                    "difference": _difference_dict(t.difference)} for t in c.tasks],
         "left_out": [{"task": task, "reason": why} for task, why in c.left_out],
     }
+
+
+def track_comparisons_dict(c: TrackComparisons) -> dict:
+    """As JSON: a v1 suite's one comparison as :func:`comparison_dict`; a v2 suite's as
+    ``{"suite", "a", "b", "tracks": {track: comparison_dict}, "not_compared": [{"what", "reason"}]}``."""
+    if list(c.comparisons) == [None]:
+        return comparison_dict(c.comparisons[None])
+    first = next(iter(c.comparisons.values()))
+    return {"suite": first.suite, "a": first.name_a, "b": first.name_b,
+            "tracks": {str(track): comparison_dict(comparison) for track, comparison in c.comparisons.items()},
+            "not_compared": [{"what": what, "reason": why} for what, why in c.not_compared]}

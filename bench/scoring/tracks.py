@@ -41,6 +41,31 @@ def task_track(task: str) -> str | None:
     return _checked(task, getattr(get_spec(task), "track", None))
 
 
+def registered_track(task: str) -> str | None:
+    """The track of a registered task; None for a v0/v1 task or one this install does not register.
+
+    The tolerant :func:`task_track` for boards and comparisons, whose results files may name tasks
+    of another install (they then count as untracked rather than failing).
+    """
+    try:
+        return task_track(task)
+    except KeyError:
+        return None
+
+
+def named_tracks(tasks: Iterable[str], track_of: TrackOf = registered_track) -> dict[str, list[str]]:
+    """:func:`tasks_by_track` without the untracked (None) group: the boards a set of tasks falls into.
+
+    Args:
+        tasks: task IDs.
+        track_of: task → track (default: the registered spec's, None when unregistered).
+
+    Returns:
+        track → its tasks, ``TRACKS`` order; empty when no task names a track (a v1 suite).
+    """
+    return {track: members for track, members in tasks_by_track(tasks, track_of).items() if track is not None}
+
+
 def tasks_by_track(tasks: Iterable[str], track_of: TrackOf = task_track) -> dict[str | None, list[str]]:
     """Tasks grouped by track: ``TRACKS`` in order, then None (v0/v1 tasks); each group keeps the given order.
 
@@ -91,4 +116,4 @@ def track_scores(episodes: Iterable[Mapping], suite_tasks: Sequence[str], *, sui
     return out
 
 
-__all__ = ["TRACKS", "task_track", "tasks_by_track", "track_scores"]
+__all__ = ["TRACKS", "named_tracks", "registered_track", "task_track", "tasks_by_track", "track_scores"]
