@@ -1,4 +1,4 @@
-"""``swarmloc demo``: the main job — the shipped methods on the quick suite, then the leaderboard."""
+"""``swarmloc demo``: the main job — the shipped methods on the quick suite (``quick-v2``), then the leaderboard."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from typing import Literal
 #: so that the main job stays short on a 2-core machine (the target is five minutes; measured
 #: 4 min 30 s by `make demo` with a populated leaderboard store, warm numba cache: quick-v1 99 s
 #: + 41 s of plots, real-v1 95 s + 20 s, the leaderboard ≈ 15 s; with ``non-cooperative`` too,
-#: 4 min 58 s; `pf` is a third of quick-v1's CPU time). The task-specific estimators (IMM,
+#: 4 min 58 s; `pf` is a third of quick-v1's CPU time; quick-v2, benchmark v2's 9 headline tasks: 23 s
+#: of evaluation and 34 s in all with the plots). The task-specific estimators (IMM,
 #: federated, CI-EKF, the other PFs) are on the leaderboard and one flag away.
 DEMO_METHODS = ("uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "random",
                 "mappo", "dead-reckoning", "pf", "oracle")
@@ -25,8 +26,9 @@ class Options:
 
     out: Path = Path("swarmloc-demo")
     """Output folder (results/, plots/, summary.md; the real flights' in real-v1/; the leaderboard site in leaderboard/)."""
-    suite: str = "quick-v1"
-    """Suite to run (`quick` for the frozen v0 tasks)."""
+    suite: str = "quick-v2"
+    """Suite to run: `quick-v2` (benchmark v2's headline tasks, one board per track), `quick-v1` (benchmark v1,
+    deprecated), `quick` (the frozen v0 tasks)."""
     workers: int = 2
     """Worker processes (or the CPUs of a local Ray cluster)."""
     backend: Literal["serial", "process", "ray"] | None = None
@@ -67,7 +69,7 @@ def run(opts: Options) -> int:
         return 2
     where = {"backend": backend, "address": opts.address}
     run_demo(methods, get_suite(opts.suite), opts.out, workers=opts.workers, plots=opts.plots, **where)
-    if opts.suite in ("quick", "quick-v1"):  # the real flights join the demo wherever their data is imported
+    if opts.suite in ("quick", "quick-v1", "quick-v2"):  # the real flights join wherever their data is imported
         run_real_flight_demo(methods, opts.out / REAL_SUITE, workers=opts.workers, plots=opts.plots, **where)
     if opts.leaderboard:
         show_leaderboard(opts.out, opts.db)

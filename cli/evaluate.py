@@ -18,9 +18,10 @@ class Options:
     """Registered name (see `swarmloc methods`), `name+smooth`, `package.module:factory` or `path/to/file.py:factory`."""
     out: Path
     """Results file to write (JSON); per-step traces of the first seeds go to `<stem>.traces.npz` beside it."""
-    suite: str = "quick-v1"
-    """Suite: `quick-v1`, `standard-v1`, `dev-v1` (benchmark v1); `quick`, `standard-v0`, `dev` (the frozen v0
-    tasks); `real-v0` or `real-v1` (real flights; need the imported data)."""
+    suite: str = "quick-v2"
+    """Suite: `quick-v2`, `standard-v2`, `dev-v2` (benchmark v2, one board per track); `quick-v1`, `standard-v1`,
+    `dev-v1` (benchmark v1, deprecated; the shipped board); `quick`, `standard-v0`, `dev` (the frozen v0 tasks);
+    `real-v0` or `real-v1` (real flights; need the imported data)."""
     tasks: str | None = None
     """Only these tasks of the suite, comma-separated IDs (the `swarmloc/` prefix may be omitted)."""
     workers: int = 1

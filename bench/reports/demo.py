@@ -27,6 +27,7 @@ from swarmloc.bench.reports.plots import plot_results, short_name
 from swarmloc.bench.evaluation.results import Results, write_results
 from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate_methods, traces_path, write_traces
 from swarmloc.bench.scoring.score import suite_score
+from swarmloc.bench.scoring.tracks import tasks_by_track
 from swarmloc.bench.evaluation.suites import Suite
 
 
@@ -57,12 +58,14 @@ def _mean(results: Results, metric: str) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def summarize_results(results: Results, cpu_s: float | None = None) -> SummaryRow:
-    """The summary line of one results file (``cpu_s``: the method's CPU time, if measured)."""
-    score = suite_score([e.model_dump() for e in results.episodes], list(results.aggregates),
+def summarize_results(results: Results, cpu_s: float | None = None, tasks: Sequence[str] | None = None) -> SummaryRow:
+    """The summary line of one results file (``cpu_s``: the method's CPU time, if measured), over ``tasks``
+    (default: every task of the file; a benchmark v2 board scores one track's tasks)."""
+    chosen = list(results.aggregates) if tasks is None else [t for t in results.aggregates if t in tasks]
+    score = suite_score([e.model_dump() for e in results.episodes if e.task in chosen], chosen,
                         suite=results.suite.name)
     energy = _mean(results, "energy_j")
-    k, n = score.coverage if score is not None else (0, len(results.aggregates))
+    k, n = score.coverage if score is not None else (0, len(chosen))
     return SummaryRow(
         method=results.method.name, track=results.method.track, privileged=results.method.privileged,
         tasks=f"{k}/{n}", full=k == n,
@@ -128,12 +131,12 @@ def summary_cells(row: SummaryRow) -> list[str]:
             "—" if row.cpu_s is None else f"{row.cpu_s:.1f}"]
 
 
-def _ranked(all_results: dict[str, Results],
-            cpu: dict[str, float] | None = None) -> tuple[list[SummaryRow], list[SummaryRow]]:
-    """Summary rows: public methods covering every task by 2^S (best first), then partial coverage, then
-    privileged ones."""
+def _ranked(all_results: dict[str, Results], cpu: dict[str, float] | None = None,
+            tasks: Sequence[str] | None = None) -> tuple[list[SummaryRow], list[SummaryRow]]:
+    """Summary rows over ``tasks`` (default all): public methods covering every task by 2^S (best first), then
+    partial coverage, then privileged ones."""
     cpu = cpu or {}
-    rows = [summarize_results(r, cpu.get(r.method.name)) for r in _ordered(all_results)]
+    rows = [summarize_results(r, cpu.get(r.method.name), tasks) for r in _ordered(all_results)]
     public = sorted([r for r in rows if not r.privileged],
                     key=lambda r: (not r.full, -(r.score[0] if r.score else -np.inf)))
     return public, [r for r in rows if r.privileged]
@@ -161,21 +164,41 @@ def print_tables(all_results: dict[str, Results], console: Console, suite: Suite
                 table.add_section()
             table.add_row(escape(cells[0]), *[cells[j] for j in cols], style="dim italic" if i >= n_public else None)
         console.print(table)
-    t2 = Table(title=escape("summary — × uniform: 2^S, how many times lower the error is than the standard CEKF's "
-                     "(geometric mean over covered tasks, stratified bootstrap 95% CI); gap closed: of the way "
-                     "from uniform to the information bound; partial coverage ranked apart; "
-                     "CPU [s]: the method's evaluation time here"),
-               title_style="bold")
-    for j, name in enumerate(SUMMARY_HEADER):
-        t2.add_column(escape(name), justify="left" if j < 2 else "right", no_wrap=j in (0, 3, 4, 5))
-    public, privileged = _ranked(all_results, cpu)
-    for r in public:
-        t2.add_row(*map(escape, summary_cells(r)))
-    if privileged:
-        t2.add_section()
-        for r in privileged:
-            t2.add_row(*map(escape, summary_cells(r)), style="dim italic")
-    console.print(t2)
+    for board, tasks in boards(suite).items():
+        t2 = Table(title=escape(_board_title(board) + "summary — × uniform: 2^S, how many times lower the error is "
+                                f"than the standard CEKF's ({_averaging(board)} 95% CI); gap closed: of the way "
+                                "from uniform to the information bound; partial coverage ranked apart; "
+                                "CPU [s]: the method's evaluation time here"),
+                   title_style="bold")
+        for j, name in enumerate(SUMMARY_HEADER):
+            t2.add_column(escape(name), justify="left" if j < 2 else "right", no_wrap=j in (0, 3, 4, 5))
+        public, privileged = _ranked(all_results, cpu, tasks)
+        for r in public:
+            t2.add_row(*map(escape, summary_cells(r)))
+        if privileged:
+            t2.add_section()
+            for r in privileged:
+                t2.add_row(*map(escape, summary_cells(r)), style="dim italic")
+        console.print(t2)
+
+
+def boards(suite: Suite) -> dict[str | None, list[str] | None]:
+    """The summary boards of a suite: one per benchmark v2 track (its tasks), or one board of every task (None)
+    for a v0/v1 suite, whose tasks name no track. Scores never mix tracks."""
+    groups = tasks_by_track(suite.tasks)
+    if list(groups) == [None]:
+        return {None: None}
+    return dict(groups)
+
+
+def _board_title(board: str | None) -> str:
+    return "" if board is None else f"{board} track: "
+
+
+def _averaging(board: str | None) -> str:
+    if board is None:
+        return "geometric mean over covered tasks, stratified bootstrap"
+    return "families weigh equally, hierarchical bootstrap over families and seeds"
 
 
 def markdown_tables(all_results: dict[str, Results], suite: Suite, cpu: dict[str, float] | None = None) -> str:
@@ -184,14 +207,16 @@ def markdown_tables(all_results: dict[str, Results], suite: Suite, cpu: dict[str
     lines = [f"Mean RMSE [m] per task (suite `{suite.name}`, {len(suite.seeds(suite.tasks[0]))} seeds per task; "
              "† privileged, not ranked; — not run):", ""]
     lines += markdown_table(header, rows, align="l" + "r" * (len(header) - 1))
-    public, privileged = _ranked(all_results, cpu)
-    lines += ["", "Summary (× uniform: 2^S, how many times lower the error is than the standard CEKF's, "
-              "geometric mean over the covered tasks, stratified bootstrap 95% CI; gap closed: mean over tasks of "
-              "the gain over the gain achievable down to the information bound; IQM g: interquartile mean of the "
-              "per-episode log2 gains; partial coverage ranked apart; ms/step and mJ/UAV on the reference "
-              "processor; CPU [s]: the method's own evaluation time here, all tasks):", ""]
-    lines += markdown_table(SUMMARY_HEADER, [summary_cells(r) for r in public + privileged],
-                            align="ll" + "r" * (len(SUMMARY_HEADER) - 2))
+    for board, tasks in boards(suite).items():
+        public, privileged = _ranked(all_results, cpu, tasks)
+        averaging = "geometric mean over the covered tasks, stratified bootstrap" if board is None else _averaging(board)
+        lines += ["", f"{_board_title(board).capitalize()}Summary (× uniform: 2^S, how many times lower the error is "
+                  f"than the standard CEKF's, {averaging} 95% CI; gap closed: mean over tasks of "
+                  "the gain over the gain achievable down to the information bound; IQM g: interquartile mean of the "
+                  "per-episode log2 gains; partial coverage ranked apart; ms/step and mJ/UAV on the reference "
+                  "processor; CPU [s]: the method's own evaluation time here, all tasks):", ""]
+        lines += markdown_table(SUMMARY_HEADER, [summary_cells(r) for r in public + privileged],
+                                align="ll" + "r" * (len(SUMMARY_HEADER) - 2))
     return "\n".join(lines) + "\n"
 
 
