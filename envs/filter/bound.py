@@ -71,6 +71,17 @@ information of the noise density, so R_c⁻¹ ⪰ I_v keeps it a lower bound:
   σ (std 0.91 / 0.77 / 0.72 m at a = 0.1 / 0.3 / 0.5 against 1 m), so its Fisher information
   exceeds 1/σ² and on those tasks the bound is not strictly a lower bound.
 
+GNSS error correlated in time (``Sensors.gps_correlation_time`` > 0): not modelled, a limitation.
+The bound takes every fix as white, R_c = σ², independent of the last one. A Gauss–Markov error
+of the same stationary σ carries less position information over a run of fixes (averaging
+n fixes shrinks a white error by √n, a correlated one by much less while n·dt ≲ τ), so on
+such a task the bound credits the fixes with information they do not have and reads low
+(optimistic); it is no longer the PCRLB of the simulated world, and no statement that it
+bounds every estimator holds there (a differenced pair of correlated fixes, on the other
+hand, tells the velocity better than a white pair). Modelling it would add the 3 error
+states of each receiver to the joint state (e⁺ = φ e + w, z = p + e), which the fast path's
+position-only measurement structure does not take as it stands.
+
 Fast path. The dynamics are linear, so the recursion is a Kalman covariance recursion with
 the expected information. ``pcrlb`` runs it in covariance form C = J⁻¹ on the blocks
 A = C_pp (3N × 3N), B = C_pr (3N × 3N·m), V = C_rr, r = [v, (b), (f)] the other states of all

@@ -3,7 +3,8 @@
 Per UAV the slots are, in order: anchors (one range per anchor, or one range difference
 per TDOA pair), peers (every other UAV, in index order), landmark slots (one per
 landmark), GPS. The layout is static per task; measurements that are absent in a step
-(out of range, lost, outside the topology) are masked, never dropped from the shape.
+(out of range, lost, outside the topology) are masked, never dropped from the shape. A UAV
+without a GNSS receiver (``Sensors.gps_nodes``) keeps its GPS slot, never linked.
 
 A TDOA channel refers to two anchors: its ``target`` is the pair code ``i·A + j`` (A the
 number of anchors) of the pair (i, j) it measures, z = ‖p − a_j‖ − ‖p − a_i‖
@@ -48,7 +49,8 @@ class ChannelLayout:
         kind: ``(N, L)`` channel kind ids (ANCHOR, PEER, LANDMARK, GPS, PEER_REL, TDOA).
         target: ``(N, L)`` anchor / UAV / landmark index the channel refers to (-1 for GPS;
             the pair code ``i·A + j`` for TDOA).
-        linked: ``(N, L)`` whether the topology connects the slot at all.
+        linked: ``(N, L)`` whether the topology connects the slot at all (a GPS slot: whether
+            the UAV has a receiver).
         sigma: ``(N, L)`` nominal noise std per scalar row [m].
     """
 
@@ -68,13 +70,20 @@ class ChannelLayout:
 
 
 def _peer_linked(spec: TaskSpec, i: int, j: int) -> bool:
+    """Whether UAV i measures UAV j (i ≠ j) under the task's peer topology."""
     topology = spec.sensors.peers.topology
     if topology == "all":
         return True
     if topology == "chain":
         return abs(i - j) == 1
-    # leader topology: UAV 0 leads; every follower links to the leader only
-    return i != 0 and j == 0
+    # leader topology: a follower links to every leader, a leader to the other leaders; so
+    # i measures j exactly when j leads (with the one leader (0,): followers to UAV 0 only)
+    return j in spec.sensors.peers.leaders
+
+
+def _has_receiver(spec: TaskSpec, i: int) -> bool:
+    """Whether UAV i carries a GNSS receiver (``Sensors.gps_nodes``; empty: every UAV)."""
+    return not spec.sensors.gps_nodes or i in spec.sensors.gps_nodes
 
 
 def build_layout(spec: TaskSpec) -> ChannelLayout:
@@ -108,5 +117,6 @@ def build_layout(spec: TaskSpec) -> ChannelLayout:
             col += 1
         if s.gps_sigma:
             kind[i, col], target[i, col], sigma[i, col] = GPS, -1, s.gps_sigma[i]
+            linked[i, col] = _has_receiver(spec, i)
             col += 1
     return ChannelLayout(kind=kind, target=target, linked=linked, sigma=sigma)

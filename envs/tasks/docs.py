@@ -9,6 +9,8 @@ resulting ``__doc__`` into ``docs/tasks/<Name>.md`` (``swarmloc docs tasks``).
 
 from __future__ import annotations
 
+import math
+
 from swarmloc.envs.tasks.channels import KIND_NAMES, build_layout
 from swarmloc.envs.world.cost import DEFAULT_PROFILE
 from swarmloc.envs.world.observation import FEATURE_NAMES, SCALE_DISTANCE, SCALE_INNOVATION, SCALE_JERK, SCALE_NIS
@@ -112,7 +114,8 @@ _DESCRIBED_FAULTS = {"nlos_steps", "nlos_gauss_markov", "nlos_uniform", "imu_cas
                      "vision_outage", "packet_loss", "gps_drifts", "hybrid_noise", "uwb_outage",
                      "vision_outage_random", "gps_drift_random"}
 _DESCRIBED_SENSORS = {"imu_sigma", "imu_bias_sigma", "anchor_sigma", "anchor_max_range", "peers", "camera_sigma",
-                      "camera_max_range", "gps_sigma", "velocity_sigma", "velocity_bias_sigma", "tdoa"}
+                      "camera_max_range", "gps_sigma", "gps_nodes", "gps_correlation_time", "velocity_sigma",
+                      "velocity_bias_sigma", "tdoa"}
 
 
 def _other_fields(model, described: set[str]) -> list[tuple[str, object]]:
@@ -120,6 +123,23 @@ def _other_fields(model, described: set[str]) -> list[tuple[str, object]]:
     defaults = type(model)()
     return [(name, getattr(model, name)) for name in type(model).model_fields
             if name not in described and getattr(model, name) != getattr(defaults, name)]
+
+
+def _gps_line(spec: TaskSpec) -> str:
+    """The Measurement Model's GPS line: the receivers, σ and, where correlated, the error's time constant."""
+    s = spec.sensors
+    if s.gps_nodes:
+        without = [i for i in range(spec.n_uav) if i not in s.gps_nodes]
+        who = (f"position fix on UAVs {sorted(s.gps_nodes)} (a GNSS receiver; the GPS slots of UAVs {without} "
+               "are never valid)")
+    else:
+        who = "position fix per UAV"
+    line = f"- GPS: {who}, σ = {list(s.gps_sigma)} m"
+    if s.gps_correlation_time > 0:
+        phi = math.exp(-spec.dt / s.gps_correlation_time)
+        line += (f"; the error of each axis is Gauss–Markov in time, τ = {s.gps_correlation_time:g} s (stationary "
+                 f"std σ, lag-1 autocorrelation exp(−dt/τ) = {phi:.3g}), nominal noise, not a fault")
+    return line + "."
 
 
 def _measurement_model(spec: TaskSpec) -> str:
@@ -146,7 +166,9 @@ def _measurement_model(spec: TaskSpec) -> str:
                          f"pairs {pairs}; H = u_j − u_i on the position (u_k the unit vector from anchor k).")
     if spec.n_peer_channels:
         kind = "range" if s.peers.kind == "range" else "relative position (3-vector)"
-        lines.append(f"- Peers: UWB {kind} to other UAVs, topology `{s.peers.topology}`, σ {s.peers.sigma:g} m; "
+        leaders = (f" (leaders {list(s.peers.leaders)}: each follower measures every leader, each leader the "
+                   "other leaders)" if s.peers.leaders != (0,) else "")
+        lines.append(f"- Peers: UWB {kind} to other UAVs, topology `{s.peers.topology}`{leaders}, σ {s.peers.sigma:g} m; "
                      "fused against the neighbour's broadcast prior estimate"
                      + (" by covariance intersection" if spec.filter.peer_update == "ci" else "")
                      + (f"; max range {s.peers.max_range:g} m." if s.peers.max_range < 1e6 else "."))
@@ -154,7 +176,7 @@ def _measurement_model(spec: TaskSpec) -> str:
         lines.append(f"- Camera: {len(spec.landmarks)} landmarks, relative position σ {s.camera_sigma:g} m per "
                      f"axis, visible within {s.camera_max_range:g} m.")
     if s.gps_sigma:
-        lines.append(f"- GPS: position fix per UAV, σ = {list(s.gps_sigma)} m.")
+        lines.append(_gps_line(spec))
     if s.velocity_sigma is not None:
         lines.append(f"- Visual odometry: world-frame velocity per UAV, σ {s.velocity_sigma:g} m/s per axis"
                      + (f", constant per-episode bias σ {s.velocity_bias_sigma:g} m/s" if s.velocity_bias_sigma

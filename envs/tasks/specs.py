@@ -134,12 +134,33 @@ class PeerLinks(Frozen):
     ``kind="range"``: scalar range; ``"relative_position"``: the neighbour's position
     relative to the receiver (UWB range + bearing, federated §2.2). ``topology`` says who
     links to whom: every pair, a chain (i ↔ i±1), or each follower to the leader(s).
+
+    With ``topology="leader"`` the UAVs of ``leaders`` lead: a follower (any other UAV)
+    measures every leader and no other follower, and each leader measures the other leaders
+    and no follower. federated §2.2: a few leaders carry precise GNSS/INS navigation and the
+    followers range to them (there each follower ranges to its nearest leader only; here to
+    every leader, as far as ``max_range`` lets it). The default ``(0,)`` is every v0/v1 leader
+    task: one leader, which measures nobody.
     """
 
     kind: Literal["none", "range", "relative_position"] = "range"
     topology: Literal["all", "chain", "leader"] = "all"
     sigma: PositiveFloat = 0.15
     max_range: PositiveFloat = 1e6
+    leaders: tuple[Annotated[int, Field(ge=0)], ...] = Field(
+        default=(0,), min_length=1, exclude_if=lambda value: value == (0,),
+        description="the leading UAVs of topology='leader' (a follower links to every leader, the leaders to each "
+                    "other); (0,) = UAV 0 alone (every v0/v1 task; left out of the spec's canonical JSON at that "
+                    "value)")
+
+    @model_validator(mode="after")
+    def _leaders(self) -> "PeerLinks":
+        if len(set(self.leaders)) != len(self.leaders):
+            raise ValueError(f"leaders={self.leaders} lists a UAV twice")
+        if self.leaders != (0,) and self.topology != "leader":
+            raise ValueError(f"leaders={self.leaders} needs topology='leader' (got {self.topology!r}): only the "
+                             "leader topology has leaders")
+        return self
 
 
 class Tdoa(Frozen):
@@ -178,7 +199,29 @@ def all_pairs(n_anchors: int) -> tuple[tuple[int, int], ...]:
 
 
 class Sensors(Frozen):
-    """Nominal sensor models (standard deviations are per axis / per range)."""
+    """Nominal sensor models (standard deviations are per axis / per range).
+
+    GNSS. ``gps_sigma`` gives every UAV a GPS slot; ``gps_nodes`` says which UAVs actually
+    carry a receiver. (federated §2.2 gives its followers a low-grade receiver and its
+    leaders a precise one; followers with none, leaning on the leaders alone, are the
+    GNSS-denied end of that scheme.)
+    The error of a fix is white by default; with ``gps_correlation_time`` τ > 0 each axis is
+    a first-order Gauss–Markov process e_k = φ e_{k−1} + σ√(1−φ²) n_k, φ = exp(−dt/τ), whose
+    stationary std is the fix's ``gps_sigma`` and whose lag-1 autocorrelation is φ; it starts
+    stationary (e_0 ~ N(0, σ²)). Why: a standalone single-frequency fix's error is dominated
+    by the residual ionospheric, tropospheric and satellite orbit and clock errors and by
+    multipath, which change with the satellite geometry and the surroundings over tens of
+    seconds to tens of minutes, not by the receiver's tracking noise (P. D. Groves, *Principles
+    of GNSS, Inertial, and Multisensor Integrated Navigation Systems*, 2nd ed., Artech House,
+    2013, the chapter on GNSS error sources); measured on a consumer receiver (Garmin 12XL,
+    twenty days of static fixes), the autocorrelation of the horizontal error bends at about
+    one minute and decays over tens of minutes after it (D. L. Wilson, "Correlation of
+    errors", http://www.erols.com/dlwilson/gpscorr.htm). So τ is tens of seconds to minutes;
+    the task chooses it, this model is the mechanism. The correlated error is the fix's
+    nominal noise, not a fault: it is not in ``SenseBuffers.systematic`` and not labelled
+    (``labels.py``). It does not combine with ``Faults.hybrid_noise``, which replaces the
+    fix's white noise by a per-fix heavy-tailed draw (the spec refuses the pair).
+    """
 
     imu_sigma: NonNegFloat = 0.1
     imu_bias_sigma: NonNegFloat = Field(default=0.0, description="constant per-episode accelerometer bias std [m/s²]")
@@ -196,6 +239,18 @@ class Sensors(Frozen):
         default=0.0, description="error std per axis of the landmark map (the public landmark positions), drawn per "
                                  "episode [m]; 0 = the map is exact")
     gps_sigma: tuple[PositiveFloat, ...] = Field(default=(), description="per-UAV GPS std [m]; empty = no GPS")
+    gps_nodes: tuple[Annotated[int, Field(ge=0)], ...] = Field(
+        default=(), exclude_if=lambda value: value == (),
+        description="UAVs with a GNSS receiver; empty = every UAV (every v0/v1 task; left out of the spec's "
+                    "canonical JSON then). A UAV outside it keeps its GPS slot and its gps_sigma entry (the layout "
+                    "is static) but the slot is never linked, so never valid")
+    gps_correlation_time: NonNegFloat = Field(
+        default=0.0, exclude_if=lambda value: value == 0.0,
+        description="time constant τ of the GNSS error [s]: each axis's error is a first-order Gauss–Markov "
+                    "process of stationary std gps_sigma, e_k = φ e_{k−1} + σ√(1−φ²) n_k, φ = exp(−dt/τ), "
+                    "stationary from the start of an episode; 0 = white (every v0/v1 task; left out of the "
+                    "spec's canonical JSON then). A single-frequency receiver's position error is correlated "
+                    "over tens of seconds to minutes (``Sensors``)")
     velocity_sigma: PositiveFloat | None = Field(
         default=None, description="visual odometry: world-frame velocity std per axis [m/s]; None = no VO")
     velocity_bias_sigma: NonNegFloat = Field(
@@ -585,6 +640,8 @@ class TaskSpec(Frozen):
             node_lists.append(("faults.vision_outage_random.nodes", f.vision_outage_random.nodes))
         if f.uwb_outage is not None:
             node_lists.append(("faults.uwb_outage.nodes", f.uwb_outage.nodes))
+        if f.hybrid_noise is not None:
+            node_lists.append(("faults.hybrid_noise.nodes", f.hybrid_noise.nodes))
         for field, nodes in node_lists:
             bad = [i for i in nodes if not 0 <= i < n]
             if bad:
@@ -608,6 +665,7 @@ class TaskSpec(Frozen):
             self._check_healthy_scoring()
         if (f.gps_drifts or f.gps_drift_random or f.hybrid_noise) and not gps:
             raise ValueError("GPS faults need sensors.gps_sigma for every UAV")
+        self._check_gnss()
         if self.sensors.velocity_bias_sigma > 0 and self.sensors.velocity_sigma is None:
             raise ValueError("sensors.velocity_bias_sigma needs sensors.velocity_sigma (a VO sensor)")
         if self.scoring.align_first_seconds > 0 and not (
@@ -620,6 +678,35 @@ class TaskSpec(Frozen):
         if not (self.anchors or self.landmarks or gps or self.sensors.peers.kind != "none"):
             raise ValueError("a task needs at least one measurement channel (anchors, landmarks, gps or peers)")
         return self
+
+    def _check_gnss(self) -> None:
+        """GNSS receivers (``sensors.gps_nodes``), their error's correlation, the leaders, and the GPS faults on them."""
+        n, s, f = self.n_uav, self.sensors, self.faults
+        for field, nodes in (("sensors.gps_nodes", s.gps_nodes), ("sensors.peers.leaders", s.peers.leaders)):
+            bad = [i for i in nodes if i >= n]
+            if bad:
+                raise ValueError(f"{field} contains {bad}; UAV indices must be in [0, {n - 1}]")
+        if len(set(s.gps_nodes)) != len(s.gps_nodes):
+            raise ValueError(f"sensors.gps_nodes={s.gps_nodes} lists a UAV twice")
+        if (s.gps_nodes or s.gps_correlation_time > 0) and not s.gps_sigma:
+            raise ValueError("sensors.gps_nodes and sensors.gps_correlation_time need sensors.gps_sigma (a GPS slot "
+                             "per UAV)")
+        if s.gps_correlation_time > 0 and f.hybrid_noise is not None:
+            raise ValueError(f"sensors.gps_correlation_time={s.gps_correlation_time} with faults.hybrid_noise is not "
+                             "modelled: hybrid noise replaces a fix's white noise by an independent heavy-tailed draw "
+                             "per fix, which a Gauss–Markov error cannot also be (use one or the other)")
+        receivers = set(s.gps_nodes or range(n))
+        faulty = [(f"faults.gps_drifts[{k}].nodes", d.nodes) for k, d in enumerate(f.gps_drifts)]
+        if f.gps_drift_random is not None:
+            faulty.append(("faults.gps_drift_random.nodes", f.gps_drift_random.nodes))
+        if f.hybrid_noise is not None:
+            faulty.append(("faults.hybrid_noise.nodes", f.hybrid_noise.nodes))
+        for field, nodes in faulty:
+            without = sorted(set(nodes or range(n)) - receivers)
+            if without:
+                named = f"{field}={nodes}" if nodes else f"{field}=() (every UAV)"
+                raise ValueError(f"{named} includes UAVs {without} without a GNSS receiver; a GPS fault needs a "
+                                 f"receiver: use UAVs of sensors.gps_nodes={tuple(sorted(receivers))}")
 
     def _check_healthy_scoring(self) -> None:
         """``scoring.nodes_from_schedule="healthy"`` must leave every episode at least one scored UAV."""

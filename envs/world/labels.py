@@ -16,6 +16,12 @@ A channel-step is labelled faulty when its *systematic* error exceeds k·σ_eff
   e = b + p_j − p̂_j. A link to a drifted neighbour therefore stays labelled while the
   neighbour's estimate is off, not only while its IMU is faulty.
 
+GNSS error correlated in time (``Sensors.gps_correlation_time``) is not systematic: it is the
+fix's nominal noise, zero-mean with the stationary variance σ² the filter is told, only not
+independent from one fix to the next; a fault is what the scenario injects on top of it (a
+drift, a heavy tail). It stays out of ``systematic`` and of the labels, so a label still
+marks a fault and not an unlucky stretch of noise.
+
 σ_eff is the spread the filter should expect of e without a fault: σ for the own error,
 σ_eff² = σ² + uᵀ P_j u for a peer range, and for 3-vector channels the Mahalanobis norm
 with S = σ² I (GPS) or S = σ² I + P_j,pp (relative position), P_j the neighbour's prior

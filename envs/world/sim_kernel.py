@@ -7,7 +7,7 @@ core calls it inside its own step kernel), ``sense_batch`` the whole batch (and
 ``sense_batch_threaded`` with threads over blocks of episodes), and
 ``reset_episodes`` starts episodes at step 0. Every fault acts inside the kernel: range
 biases, Gauss–Markov NLOS, IMU cascades, camera and UWB outages, GPS drift, hybrid GPS
-noise, packet loss; visual odometry is sensed beside the truth. All draws come from the
+noise, packet loss (and GNSS noise correlated in time, a Gauss–Markov error per axis); visual odometry is sensed beside the truth. All draws come from the
 counter-based RNG (``rng.py``) keyed by (seed, step, stream, index), so the numbers do not
 depend on the batch, the thread or the order of evaluation. A TDOA channel senses the range
 difference of its anchor pair with the anchor ranges' noise stream; its NLOS bias (scheduled
@@ -53,6 +53,7 @@ class WorldInputs(NamedTuple):
         camera_fov_cos: cosine of half the camera's field of view; the camera looks along the
             UAV's velocity (−1: omnidirectional, every landmark in range is seen).
         has_velocity: the task has a visual-odometry sensor; velocity_sigma its noise σ [m/s].
+        gps_tau: time constant τ of the GNSS error [s] (``Sensors.gps_correlation_time``); 0: white.
         label_threshold: ``(N, L)`` error-label threshold on the systematic error in σ_eff
             (``labels.label_thresholds``).
 
@@ -61,6 +62,8 @@ class WorldInputs(NamedTuple):
         imu_const_bias: ``(B, N, 3)`` constant accelerometer bias [m/s²].
         velocity_bias: ``(B, N, 3)`` constant visual-odometry bias [m/s].
         gm_bias, gm_left: ``(B, N, L)`` Gauss–Markov NLOS bias [m] and steps left in the episode.
+        gps_error: ``(B, N, 3)`` Gauss–Markov GNSS error per axis in units of the fix's σ (unit
+            stationary variance; used when gps_tau > 0).
 
     Step buffers (written by ``sense_episodes`` for step k):
         pos, vel, acc: ``(B, N, 3)`` truth [m, m/s, m/s²].
@@ -90,6 +93,7 @@ class WorldInputs(NamedTuple):
     anchor_range: float
     has_velocity: bool
     velocity_sigma: float
+    gps_tau: float
     label_threshold: np.ndarray
     seeds: np.ndarray
     steps: np.ndarray
@@ -97,6 +101,7 @@ class WorldInputs(NamedTuple):
     velocity_bias: np.ndarray
     gm_bias: np.ndarray
     gm_left: np.ndarray
+    gps_error: np.ndarray
     pos: np.ndarray
     vel: np.ndarray
     acc: np.ndarray
@@ -188,6 +193,7 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     kind, target, linked, sigma, label_threshold = w.kind, w.target, w.linked, w.sigma, w.label_threshold
     seeds, steps, imu_const_bias, velocity_bias, gm_bias, gm_left = (w.seeds, w.steps, w.imu_const_bias,
                                                                       w.velocity_bias, w.gm_bias, w.gm_left)
+    gps_error = w.gps_error
     bias_time, bias_param, bias_mask = fs.bias_time, fs.bias_param, fs.bias_mask
     imu_time, imu_bias, imu_nodes, imu_drop = fs.imu_time, fs.imu_bias, fs.imu_nodes, fs.imu_drop
     outage_time, outage_nodes, uwb_time, uwb_mask = fs.outage_time, fs.outage_nodes, fs.uwb_time, fs.uwb_mask
@@ -197,6 +203,11 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
     gm_params = fs.gm_param  # (B, 7) [onset_rate, mean_duration, mean_bias, bias_sigma, tau, max_bias, ramp]
     hybrid_params = fs.hybrid_param  # (B, 6) [ratio, t_scale, gauss_sigma, dof_low, dof_high, model]
     n, n_l = z.shape[1], z.shape[2]
+    # GNSS error as a first-order Gauss–Markov process in units of σ: ε ← φ ε + √(1−φ²) n,
+    # φ = exp(−dt/τ) (specs.Sensors); white (the v0/v1 draw, bit for bit) when τ = 0
+    gps_markov = w.gps_tau > 0.0
+    gps_phi = math.exp(-w.dt / w.gps_tau) if gps_markov else 0.0
+    gps_step = math.sqrt(1.0 - gps_phi * gps_phi)
     # truth_at writes whole 3-vectors: into these, not into views of the batch arrays
     p, v, a = np.empty(3), np.empty(3), np.empty(3)
     for b in range(lo, hi):
@@ -375,6 +386,12 @@ def sense_episodes(w: WorldInputs, fs: FaultSchedule, go: np.ndarray, lo: int, h
                             # Gaussian one the nominal white noise
                             tail = h[0] * h[1] * student_t_at(key_gps, idx * 3 + d, nu)
                             noise = tail + (1.0 - h[0]) * h[2] * normal_at(key_gps, 1_000_000 + idx * 3 + d)
+                        elif gps_markov:
+                            # e_k = φ e_{k−1} + σ√(1−φ²) n_k: nominal noise, correlated in time (not systematic)
+                            tail = 0.0
+                            gps_error[b, i, d] = gps_phi * gps_error[b, i, d] + gps_step * normal_at(key_gps,
+                                                                                                      idx * 3 + d)
+                            noise = sg * gps_error[b, i, d]
                         else:
                             tail = 0.0
                             noise = sg * normal_at(key_gps, idx * 3 + d)
@@ -423,8 +440,10 @@ def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, veloc
                    init_pos_sigma: float, init_vel_sigma: float, x0: np.ndarray) -> None:
     """Start episodes ``idx`` at step 0 (their seeds and fault windows already set).
 
-    Writes the truth at t = 0, the per-episode constant biases and the initial prior mean
-    ``x0`` ``(B, N, 6)`` [p, v]: the truth perturbed by the stated initial uncertainty.
+    Writes the truth at t = 0, the per-episode constant biases, the GNSS error's stationary
+    start (ε_0 ~ N(0, 1) per axis in units of σ, when ``gps_tau`` > 0; drawn from the GPS
+    stream at step 0, which sensing never uses: it starts at step 1) and the initial prior
+    mean ``x0`` ``(B, N, 6)`` [p, v]: the truth perturbed by the stated initial uncertainty.
     Nothing of the previous episode leaks into the next: the step buffers are cleared (the
     first jerk feature is ‖u(1) − u(0)‖ with u(0) = 0).
     """
@@ -435,6 +454,7 @@ def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, veloc
         w.steps[b] = 0
         key = stream_key(seed, 0, Stream.INIT)
         key_vo = stream_key(seed, 0, Stream.VELOCITY)
+        key_gps = stream_key(seed, 0, Stream.GPS)
         for i in range(n):
             truth_at(w.traj_kind, w.traj_prm[i], 0.0, seed, i, w.pos[b, i], w.vel[b, i], w.acc[b, i])
             for d in range(3):
@@ -447,6 +467,7 @@ def reset_episodes(w: WorldInputs, idx: np.ndarray, imu_bias_sigma: float, veloc
                 if w.has_velocity:
                     w.velocity_bias[b, i, d] = velocity_bias_sigma * normal_at(key_vo, 1_000_000 + i * 3 + d)
                     w.velocity[b, i, d] = w.vel[b, i, d] + w.velocity_bias[b, i, d]
+                w.gps_error[b, i, d] = normal_at(key_gps, i * 3 + d) if w.gps_tau > 0.0 else 0.0
         w.z[b] = 0.0
         w.injected[b] = 0.0
         w.systematic[b] = 0.0
