@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from swarmloc.bench.evaluation.results import Results
-    from swarmloc.bench.scoring.compare import Comparison
+    from swarmloc.bench.scoring.compare import Comparison, TrackComparisons
 
 
 @dataclass
@@ -41,11 +41,12 @@ def _signed(x: float) -> str:
 
 
 def print_comparison(c: Comparison, console: Console) -> None:
-    """The per-task table and the suite line."""
+    """The per-task table and the suite line (of one track of a v2 suite: its tasks, its verdict)."""
     from rich.markup import escape
     from rich.table import Table
 
-    table = Table(title=escape(f"B against A on {c.suite}; B − A: gain over uniform in log2"), title_justify="left")
+    on = c.suite if c.track is None else f"{c.suite}, {c.track} track"
+    table = Table(title=escape(f"B against A on {on}; B − A: gain over uniform in log2"), title_justify="left")
     table.add_column("task", no_wrap=True)
     for col in ("RMSE A [m]", "RMSE B [m]", "B − A [95 % CI]", "B ahead"):
         table.add_column(escape(col), justify="right", no_wrap=True)
@@ -62,9 +63,19 @@ def print_comparison(c: Comparison, console: Console) -> None:
                   f"B ahead on {d.ahead}/{d.count} tasks; P(B > A) = {c.p_improvement:.2f}")
     verdict = ("B is ahead beyond doubt" if d.ci_low > 0 else "A is ahead beyond doubt" if d.ci_high < 0
                else "level: the seeds cannot tell them apart")
-    console.print(f"verdict: {verdict}")
+    console.print(f"verdict{'' if c.track is None else f' ({c.track} track)'}: {verdict}")
     for task, why in c.left_out:
         console.print(f"left out: {task} ({why})")
+
+
+def print_track_comparisons(c: TrackComparisons, console: Console) -> None:
+    """Each board's comparison (one per track of a v2 suite, headline first), then what no track compared."""
+    from rich.text import Text
+
+    for comparison in c.comparisons.values():
+        print_comparison(comparison, console)
+    for what, why in c.not_compared:
+        console.print(Text(f"not compared: {what} ({why})"))
 
 
 SHIPPED = "shipped:"
@@ -108,7 +119,7 @@ def run(opts: Options, console: Console | None = None) -> int:
     from rich.text import Text
 
     from swarmloc.bench.common.files import write_text_atomic
-    from swarmloc.bench.scoring.compare import compare, comparison_dict
+    from swarmloc.bench.scoring.compare import compare_tracks, track_comparisons_dict
 
     # piped output has no terminal width to fit: lay the table out for the width it needs
     console = console or (Console() if sys.stdout.isatty() else Console(width=PIPED_WIDTH))
@@ -117,14 +128,16 @@ def run(opts: Options, console: Console | None = None) -> int:
         return 2
     try:
         a, b = _load_pair(opts.a, opts.b)
-        comparison = compare(a, b, n_resamples=opts.resamples)
+        # a v2 suite: one verdict per track, as the boards rank (scores never mix tracks)
+        comparisons = compare_tracks(a, b, n_resamples=opts.resamples)
     except (ValueError, KeyError) as err:  # ResultsFileError is a ValueError
         console.print(Text(f"error: {err.args[0] if isinstance(err, KeyError) else err}", style="bold red"))
         return 2
-    for label, path, name in (("A", opts.a, comparison.name_a), ("B", opts.b, comparison.name_b)):
+    first = next(iter(comparisons.comparisons.values()))
+    for label, path, name in (("A", opts.a, first.name_a), ("B", opts.b, first.name_b)):
         console.print(Text(f"{label}: {name} ({path})"))
-    print_comparison(comparison, console)
+    print_track_comparisons(comparisons, console)
     if opts.json is not None:
-        write_text_atomic(opts.json, json.dumps(comparison_dict(comparison), indent=1) + "\n")
+        write_text_atomic(opts.json, json.dumps(track_comparisons_dict(comparisons), indent=1) + "\n")
         console.print(f"wrote {opts.json}")
     return 0

@@ -162,7 +162,9 @@ def test_the_front_page_shows_each_track_with_its_figures(tmp_path: Path) -> Non
     assert "Cooperative track (the headline)" in page and "3 tasks in 2 families: Scale (2), Cascaded (1)." in page
     assert "Probability of improvement (rliable)" in page and "Performance profiles (rliable)" in page
     assert "score.png" not in page  # no suite-wide plot mixes the tracks
-    assert 'id="ranked-tiny-v2-1"' in page  # the suite's tables as before
+    # the tables are per track too: no table spans both tracks
+    assert 'id="ranked-tiny-v2-1"' not in page
+    assert 'id="ranked-tiny-v2-1-cooperative"' in page and 'id="ranked-tiny-v2-1-robust-ranging"' in page
 
 
 def test_track_figures_are_the_same_bytes_on_every_draw(tmp_path: Path) -> None:

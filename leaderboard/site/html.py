@@ -20,6 +20,7 @@ from urllib.parse import quote
 
 from swarmloc.bench.evaluation.results import METRIC_NAMES
 from swarmloc.bench.scoring.families import group_by_family
+from swarmloc.bench.scoring.score import SuiteScore, score_version
 from swarmloc.leaderboard.site.ranking import (
     Column,
     Standing,
@@ -43,6 +44,10 @@ if TYPE_CHECKING:
     from swarmloc.leaderboard.site.track_plots import TrackSection
 
 _STATIC_FILES = ("leaderboard.css", "leaderboard.js")
+#: the track whose tables carry the cooperation gain (each UAV alone is the other track's setting)
+COOPERATIVE_TRACK = "cooperative"
+_COOPERATION_TIP = ("cooperation gain: × lower error than each UAV localizing alone (non-cooperative), score v2, "
+                    "hierarchical-bootstrap 95% CI")
 _PLOT_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg", ".webp")
 _CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
@@ -100,9 +105,21 @@ def _score_tip(board: SuiteBoard, standing: Standing) -> str | None:
     return tip
 
 
+def _cooperation_cell(score: SuiteScore | None) -> str:
+    """The cooperation gain ``2^C [low, high]`` of a v2 standing (a dash without a non-cooperative entry)."""
+    gain = None if score is None else score.cooperation
+    if gain is None:
+        return _num_cell(None, "—", "no cooperation gain: the suite has no stored non-cooperative entry")
+    low, high = 2.0**gain.ci_low, 2.0**gain.ci_high
+    return _num_cell(2.0**gain.S, f"{fmt_times(2.0 ** gain.S)} [{fmt_times(low)}, {fmt_times(high)}]",
+                     f"C = {gain.S:.3f}: × lower error than each UAV localizing alone (non-cooperative), "
+                     "hierarchical-bootstrap 95% CI")
+
+
 def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Sequence[Column], ranked: bool,
-                table_id: str) -> str:
+                table_id: str, cooperation: bool = False) -> str:
     n = len(board.tasks)
+    v2 = score_version(board.name) >= 2
     heads: list[tuple[str, str, str]] = []  # (label, sort type, title)
     if ranked:
         heads.append(("#", "number", "rank by the score (S). In the ranked table: 1 + the methods ahead beyond doubt "
@@ -111,12 +128,16 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
     heads += [
         ("Method", "text", "method name"),
         ("Track", "text", "A: link trust, B: full estimator"),
-        ("2^S", "number", "× lower error than the standard CEKF (uniform): geometric mean over tasks"),
-        ("95% CI", "number", "stratified-bootstrap 95% CI of 2^S (seeds resampled within tasks)"),
+        ("2^S", "number", "× lower error than the standard CEKF (uniform): geometric mean over "
+                          + ("families of the track's tasks (score v2)" if v2 else "tasks")),
+        ("95% CI", "number", "hierarchical-bootstrap 95% CI of 2^S (families, then seeds within their tasks)" if v2
+         else "stratified-bootstrap 95% CI of 2^S (seeds resampled within tasks)"),
         ("Gap closed", "number", "share of the achievable gain (uniform to the information bound) closed, "
                                  "mean over tasks where it is defined"),
-        ("Tasks", "number", "tasks covered / tasks in the suite"),
+        ("Tasks", "number", "tasks covered / tasks in the " + ("track" if v2 else "suite")),
     ]
+    if cooperation:  # after the CI, before "Gap closed" and "Tasks"
+        heads.insert(len(heads) - 2, ("2^C [95% CI]", "number", _COOPERATION_TIP))
     heads += [(c.header, "number", f"× uniform over {c.title}; hover a cell for its worst task") for c in columns]
     heads += [
         ("Delay [ms]", "number", "mean computation delay per step"),
@@ -144,6 +165,7 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
                       _score_tip(board, standing)),
             _num_cell(low_high[0] if low_high else None,
                       "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
+            *([_cooperation_cell(score)] if cooperation else []),
             _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
             _num_cell(k, f"{k}/{n}"),
             *(_column_cell(standing, c) for c in columns),
@@ -179,20 +201,51 @@ def _figures(plots: Sequence[SitePlot], root: Path) -> str:
     return f"<h3>Plots</h3>\n{_figure_list(plots, root)}"
 
 
+def _board_tables(board: SuiteBoard, columns: Sequence[Column], slug: str, what: str = "suite",
+                  heading: str = "h3", cooperation: bool = False) -> list[str]:
+    """A board's ranked, partial-coverage and privileged tables (a suite's, or one track's of a v2 suite)."""
+    parts = []
+    if board.ranked:
+        parts.append(_html_table(board, board.ranked, columns, ranked=True, table_id=f"ranked-{slug}",
+                                 cooperation=cooperation))
+    else:
+        parts.append("<p class=\"empty\">No ranked methods yet.</p>")
+    if board.partial:
+        parts.append(
+            f"<{heading}>Partial coverage</{heading}><p class=\"meta\">These methods cannot run some tasks of the "
+            f"{what}. They are ranked apart, by 2^S over the tasks they cover (so compared with uniform "
+            "only on those tasks); * marks a family they cover in part.</p>"
+        )
+        parts.append(_html_table(board, board.partial, columns, ranked=True, table_id=f"partial-{slug}",
+                                 cooperation=cooperation))
+    if board.privileged:
+        parts.append(
+            f"<{heading}>Privileged methods</{heading}><p class=\"meta\">These read ground truth or fault "
+            "labels (e.g. the oracle) and are not ranked.</p>"
+        )
+        parts.append(_html_table(board, board.privileged, columns, ranked=False,
+                                 table_id=f"privileged-{slug}", cooperation=cooperation))
+    return parts
+
+
 def _track_sections(slug: str, sections: Sequence[TrackSection], root: Path) -> str:
-    """A v2 suite's per-track parts: each track's task families and its figures."""
+    """A v2 suite's per-track parts: each track's task families, its tables (its own S, CI, ranks and, on the
+    cooperative track, the cooperation gain) and its figures."""
     parts = [
-        "<p class=\"meta\">Benchmark v2 scores each track apart (score v2: mean over seeds, then over a "
-        "family's tasks, then over families; hierarchical-bootstrap CIs, families then seeds). The tables "
-        "above span the whole suite; below, each track on its own tasks.</p>"
+        "<p class=\"meta\">Benchmark v2 scores each track apart and never mixes them (score v2: mean over "
+        "seeds, then over a family's tasks, then over families; hierarchical-bootstrap CIs, families then "
+        "seeds): each track below has its own tables, ranks and figures, on its own tasks.</p>"
     ]
     for section in sections:
         families = group_by_family(section.board.tasks)
         listed = ", ".join(f"{family} ({len(tasks)})" for family, tasks in families.items())
-        parts.append(f"<section class=\"track\" id=\"track-{_e(slug)}-{_e(_slug(section.track))}\">")
+        track_slug = _slug(section.track)
+        parts.append(f"<section class=\"track\" id=\"track-{_e(slug)}-{_e(track_slug)}\">")
         parts.append(f"<h3>{_e(section.title)}</h3>")
         parts.append(f"<p class=\"meta\">{len(section.board.tasks)} tasks in {len(families)} families: "
                      f"{_e(listed)}.</p>")
+        parts += _board_tables(section.board, family_columns(section.board.tasks), f"{slug}-{track_slug}",
+                               what="track", heading="h4", cooperation=section.track == COOPERATIVE_TRACK)
         if section.plots:
             parts.append(_figure_list(section.plots, root))
         else:
@@ -216,27 +269,10 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
         parts.append("<p class=\"empty\">No submissions yet.</p>")
     for board in boards:
         slug = _slug(board.name, board.version)
-        columns = family_columns(board.tasks)
         parts.append(f"<section class=\"suite\" id=\"suite-{slug}\">")
         parts.append(f"<h2>Suite {_e(board.name)} <span class=\"version\">v{_e(board.version)}</span></h2>")
-        if board.ranked:
-            parts.append(_html_table(board, board.ranked, columns, ranked=True, table_id=f"ranked-{slug}"))
-        else:
-            parts.append("<p class=\"empty\">No ranked methods yet.</p>")
-        if board.partial:
-            parts.append(
-                "<h3>Partial coverage</h3><p class=\"meta\">These methods cannot run some tasks of the "
-                "suite. They are ranked apart, by 2^S over the tasks they cover (so compared with uniform "
-                "only on those tasks); * marks a family they cover in part.</p>"
-            )
-            parts.append(_html_table(board, board.partial, columns, ranked=True, table_id=f"partial-{slug}"))
-        if board.privileged:
-            parts.append(
-                "<h3>Privileged methods</h3><p class=\"meta\">These read ground truth or fault "
-                "labels (e.g. the oracle) and are not ranked.</p>"
-            )
-            parts.append(_html_table(board, board.privileged, columns, ranked=False,
-                                     table_id=f"privileged-{slug}"))
+        if not (tracks and tracks.get(slug)):  # a v2 suite's tables are its tracks'
+            parts += _board_tables(board, family_columns(board.tasks), slug)
         if board.filled:
             ref = board.reference
             parts.append(
@@ -274,8 +310,17 @@ def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | 
     return images, None
 
 
+def _score_text(score: SuiteScore | None, n_tasks: int) -> str:
+    """A method page's score line: 2^S with its CI, S, IQM, gap closed and coverage."""
+    return "—" if score is None else (
+        f"{fmt_score(score)}× lower error than uniform (S = {score.S:.3f}; IQM of the gains "
+        f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")
+
+
 def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
-                 explanation: str = "") -> str:
+                 explanation: str = "", tracks: Sequence[tuple[str, Standing, int]] = ()) -> str:
+    """A method's page; ``tracks``: on a v2 suite, (track, its standing on the track's board, the track's task
+    count) for each track (one score line each)."""
     entry, score = standing.entry, standing.score
     results = json.loads(entry.results_json)
     prov = results.get("provenance", {})
@@ -297,9 +342,9 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
         ("Weights SHA-256", f"<code>{_e(entry.weights_sha256 or '—')}</code>"),
         ("Suite", _e(f"{entry.suite_name} v{entry.suite_version} ({entry.suite_sha256[:12]}…)")),
         ("Submitted", _e(entry.created_utc.strftime("%Y-%m-%d %H:%M UTC"))),
-        ("Score", _e("—" if score is None else
-                     f"{fmt_score(score)}× lower error than uniform (S = {score.S:.3f}; IQM of the gains "
-                     f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")),
+        # a v2 suite: one score per track, never one that mixes them
+        *([(f"Score, {track} track", _e(_score_text(on.score, n))) for track, on, n in tracks]
+          if tracks else [("Score", _e(_score_text(score, n_tasks)))]),
     ])
     provenance = _definition_rows([
         ("swarmloc version", _e(prov.get("package_version", "—"))),
@@ -404,13 +449,17 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     groups = by_suite(store.entries(suite))
     boards = [suite_board(name, version, group) for (name, version), group in groups.items()]
     explain = plots if explanations is None else explanations
+    per_track_of = {(b.name, b.version): track_boards(b, groups[(b.name, b.version)]) for b in boards}
     for board in boards:
+        per_track = per_track_of[(board.name, board.version)]
         for standing in board.standings:
-            _write_method(out, standing, len(board.tasks), plots, explain)
+            on_tracks = [(track, on, len(tb.tasks)) for track, tb in per_track.items()
+                         for on in tb.standings if on.entry is standing.entry]
+            _write_method(out, standing, len(board.tasks), plots, explain, on_tracks)
     suite_figures, track_figures = {}, {}
     for board in boards:
         slug = _slug(board.name, board.version)
-        per_track = track_boards(board, groups[(board.name, board.version)])
+        per_track = per_track_of[(board.name, board.version)]
         if per_track:  # a v2 suite: one part per track, never a plot that mixes tracks
             track_figures[slug] = _draw_track_plots(per_track, out / "plots" / f"suite-{slug}")
         else:
@@ -450,7 +499,8 @@ def _draw_track_plots(boards: dict[str, SuiteBoard], plots_dir: Path) -> list[Tr
     return sections
 
 
-def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False) -> None:
+def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False,
+                  tracks: Sequence[tuple[str, Standing, int]] = ()) -> None:
     """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
     entry = standing.entry
     results_file = out / "results" / f"{entry.id}.json"
@@ -460,7 +510,7 @@ def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, expl
         shutil.rmtree(plots_dir)
     images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
     (out / "methods" / f"{entry.id}.html").write_text(
-        _method_html(standing, n_tasks, images, error, _make_explanation(entry, out) if explain else ""),
+        _method_html(standing, n_tasks, images, error, _make_explanation(entry, out) if explain else "", tracks),
         encoding="utf-8",
     )
 

@@ -53,7 +53,7 @@ import numpy as np
 from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE
 from swarmloc.bench.scoring.families import group_by_family, short_task, task_label
 from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, score_version, separable_ranks, suite_score
-from swarmloc.bench.scoring.tracks import TRACKS, TrackOf, task_track, tasks_by_track
+from swarmloc.bench.scoring.tracks import TRACKS, TrackOf, registered_track, tasks_by_track
 from swarmloc.leaderboard.store.database import LeaderboardEntry
 
 SuiteKey = tuple[str, str]
@@ -230,14 +230,6 @@ def by_suite(entries: Iterable[LeaderboardEntry]) -> dict[SuiteKey, list[Leaderb
 def suite_boards(entries: Iterable[LeaderboardEntry]) -> list[SuiteBoard]:
     """One board per suite, in ``by_suite`` order."""
     return [suite_board(name, version, group) for (name, version), group in by_suite(entries).items()]
-
-
-def registered_track(task: str) -> str | None:
-    """The track of a registered task; None for a v0/v1 task or one this install does not register."""
-    try:
-        return task_track(task)
-    except KeyError:
-        return None
 
 
 def track_boards(board: SuiteBoard, entries: Sequence[LeaderboardEntry],

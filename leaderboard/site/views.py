@@ -27,6 +27,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from swarmloc.bench.scoring.score import SuiteScore
 from swarmloc.leaderboard.errors import StoreError
 from swarmloc.leaderboard.site.html import render_html
 from swarmloc.leaderboard.site.ranking import (
@@ -39,9 +40,10 @@ from swarmloc.leaderboard.site.ranking import (
     fmt_pct,
     fmt_times,
     split_ranked,
-    suite_boards,
+    suite_board,
     task_columns,
     task_rmse,
+    track_boards,
 )
 from swarmloc.leaderboard.store.database import LeaderboardEntry, LeaderboardStore
 
@@ -110,8 +112,16 @@ def stacked_header(label: str, width: int = HEADER_WIDTH) -> str:
     return "\n".join(lines)
 
 
+def _cooperation_text(score: SuiteScore | None) -> str:
+    """``2^C`` with its CI, ``1.52 (1.40–1.66)``; a dash without a cooperation gain."""
+    gain = None if score is None else score.cooperation
+    if gain is None:
+        return "—"
+    return f"{fmt_times(2.0 ** gain.S)} ({fmt_times(2.0 ** gain.ci_low)}–{fmt_times(2.0 ** gain.ci_high)})"
+
+
 def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_tasks: int, ranked: bool,
-                coverage: bool = True) -> Table:
+                coverage: bool = True, cooperation: bool = False) -> Table:
     # SIMPLE_HEAD draws a space between columns; no padding beside it, so seven families fit TERMINAL_WIDTH.
     table = Table(header_style="bold", box=box.SIMPLE_HEAD, padding=0, show_edge=False)
     number: dict[str, Any] = {"justify": "right", "no_wrap": True}
@@ -121,6 +131,8 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
     table.add_column(Text("Trk"), justify="center", no_wrap=True)
     table.add_column(Text("2^S"), **number)
     table.add_column(Text("95% CI"), **number)
+    if cooperation:  # a v2 cooperative track: × lower error than each UAV alone, with its CI
+        table.add_column(Text("2^C (95% CI)"), **number)
     table.add_column(Text("Gap"), **number)
     if coverage:  # the ranked table holds full coverage only: its k/T column would repeat T/T
         table.add_column(Text("Tasks"), **number)
@@ -134,8 +146,9 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
         cells = [Text(str(shown))] if ranked else []
         ci = "—" if score is None else "–".join(fmt_times(x) for x in score.times_ci)
         cells += [Text(standing.entry.name), Text(standing.entry.track),
-                  Text(fmt_times(score.times if score else None)), Text(ci),
-                  Text(fmt_pct(score.gap_closed if score else None))] + ([Text(f"{k}/{n}")] if coverage else [])
+                  Text(fmt_times(score.times if score else None)), Text(ci)]
+        cells += [Text(_cooperation_text(score))] if cooperation else []
+        cells += [Text(fmt_pct(score.gap_closed if score else None))] + ([Text(f"{k}/{n}")] if coverage else [])
         for column in columns:
             cs = column_score(score, column)
             cells.append(Text("—" if cs is None else fmt_times(cs.times) + ("" if cs.covered == cs.total else "*")))
@@ -197,6 +210,62 @@ def board_tables(board: SuiteBoard, family: str | None = None,
     return out
 
 
+#: the track whose tables carry the cooperation gain
+COOPERATIVE_TRACK = "cooperative"
+
+
+def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: str | None = None,
+                 tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
+    """The terminal view of a benchmark v2 suite: per track (headline first) its own ranked, partial-coverage and
+    privileged tables, each with its own S, CI and ranks (and the cooperation gain on the cooperative track); one
+    legend.
+
+    Args:
+        board: the suite's board (named family or tasks are checked against its tasks).
+        per_track: track → its board (:func:`~swarmloc.leaderboard.site.ranking.track_boards`).
+        family, tasks: per-task columns of one family or of these tasks; a track holding none of them
+            shows its family columns.
+
+    Raises:
+        ValueError: an unknown family or task, or more than ``MAX_TASK_COLUMNS`` tasks.
+    """
+    chosen = board_columns(board, family, tasks)
+    per_task = family is not None or tasks is not None
+    suite = f"{board.name} v{board.version}"
+    out: list[Table | Text] = []
+    for track, tb in per_track.items():
+        n = len(tb.tasks)
+        columns = [c for c in chosen if set(c.tasks) <= set(tb.tasks)] if per_task else []
+        columns = columns or family_columns(tb.tasks)
+        cooperation = track == COOPERATIVE_TRACK
+        where = f"{suite}, {track} track"
+        out.append(Text(f"swarmloc leaderboard — suite {where} (ranked by 2^S; covering all {n} tasks of the track)",
+                        style="bold"))
+        if tb.ranked:
+            out.append(_rich_table(tb.ranked, columns, n, ranked=True, coverage=False, cooperation=cooperation))
+        else:
+            out.append(Text("No ranked methods: none has a score on every task of the track.", style="italic"))
+        if tb.partial:
+            out += [Text(f"Partial coverage on {where} (ranked apart; 2^S over the covered tasks only)", style="bold"),
+                    _rich_table(tb.partial, columns, n, ranked=True, cooperation=cooperation)]
+        if tb.privileged:
+            out += [Text(f"Privileged methods on {where} (use ground truth; not ranked)", style="bold"),
+                    _rich_table(tb.privileged, columns, n, ranked=False, cooperation=cooperation)]
+    legend = ("Scores never mix tracks: each track is ranked on its own tasks. 2^S: × lower error than the "
+              "standard CEKF (uniform), score v2 (geometric mean over the track's task families, each weighing the "
+              "same), hierarchical-bootstrap 95% CI (families, then seeds). #: 1 + the methods ahead beyond doubt on "
+              "the track (paired 95% CI of the difference in S above 0). 2^C: cooperation gain, × lower error than "
+              "each UAV localizing alone (non-cooperative), with its CI. Gap: share of the achievable gain (to the "
+              "information bound) closed. Tasks: covered/total on the track. Other columns: × uniform over the "
+              "family's or task's tasks (* some not covered).")
+    if board.filled:
+        ref = board.reference
+        legend += (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"
+                   f" (#{ref.id if ref else '?'}): their results files predate it.")
+    out.append(Text(legend, style=LEGEND_STYLE))
+    return out
+
+
 def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family: str | None = None,
                        tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
     """Rich renderables: per suite, the tables of :func:`board_tables`.
@@ -207,12 +276,18 @@ def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family
         family, tasks: per-task columns of one family or of these tasks (default: per family).
 
     Returns:
-        The tables and legends, in display order (empty when the store has no entries).
+        The tables and legends, in display order (empty when the store has no entries); a benchmark v2
+        suite's per track (:func:`track_tables`).
 
     Raises:
         ValueError: an unknown family or task (see :func:`board_columns`).
     """
-    return [part for board in suite_boards(store.entries(suite)) for part in board_tables(board, family, tasks)]
+    parts: list[Table | Text] = []
+    for (name, version), group in by_suite(store.entries(suite)).items():
+        board = suite_board(name, version, group)
+        per_track = track_boards(board, group)
+        parts += track_tables(board, per_track, family, tasks) if per_track else board_tables(board, family, tasks)
+    return parts
 
 
 def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console: Console | None = None,
@@ -233,53 +308,72 @@ def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console
 
 
 def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
+    """Every board's rows: a v1 suite's board, or each track's board of a v2 suite (never one mixing tracks)."""
     rows = []
-    for board in suite_boards(entries):
-        for table, standings in (("ranked", board.ranked), ("partial", board.partial),
-                                 ("privileged", board.privileged)):
-            for standing in standings:
-                entry, score = standing.entry, standing.score
-                k, n = standing.coverage(len(board.tasks))
-                row: dict[str, Any] = {
-                    "id": entry.id,
-                    "suite": entry.suite_name,
-                    "suite_version": entry.suite_version,
-                    "rank": standing.rank if table == "ranked" else None,
-                    "name": entry.name,
-                    "authors": entry.authors,
-                    "url": entry.url,
-                    "track": entry.track,
-                    "privileged": entry.privileged,
-                    "deterministic": entry.deterministic,
-                    "verified": entry.verified,
-                    "trusted": entry.trusted,
-                    "table": table,
-                    "partial_rank": standing.rank if table == "partial" else None,
-                    "separable_rank": standing.separable_rank,
-                    "times_uniform": score.times if score else None,
-                    "times_ci_low": score.times_ci[0] if score else None,
-                    "times_ci_high": score.times_ci[1] if score else None,
-                    "S": score.S if score else None,
-                    "iqm_gain": score.iqm if score else None,
-                    "gap_closed": score.gap_closed if score else None,
-                    "tasks_covered": k,
-                    "tasks_total": n,
-                    "uniform_rmse_filled": standing.filled,
-                    "delay_ms": entry.delay_ms,
-                    "energy_j": entry.energy_j,
-                    "jitter": entry.jitter,
-                }
-                for task in board.tasks:
-                    t = score.tasks.get(task) if score else None
-                    row[f"times[{task}]"] = None if t is None else 2.0**t.mean
-                    row[f"gap_closed[{task}]"] = None if t is None else t.gap_closed
-                    row[f"rmse[{task}]"] = task_rmse(entry, task)
-                row.update(
-                    entry_point=entry.entry_point,
-                    method_hash=entry.method_hash,
-                    created_utc=entry.created_utc.isoformat(),
-                )
-                rows.append(row)
+    for (name, version), group in by_suite(entries).items():
+        board = suite_board(name, version, group)
+        per_track = track_boards(board, group)
+        for track, track_board in (per_track.items() if per_track else [(None, board)]):
+            rows += _board_rows(track_board, track)
+    return rows
+
+
+def _board_rows(board: SuiteBoard, track: str | None) -> list[dict[str, Any]]:
+    """The rows of one board; a v2 track's carry ``suite_track`` and the cooperation gain (``C``, ``cooperation_*``)."""
+    rows = []
+    for table, standings in (("ranked", board.ranked), ("partial", board.partial),
+                             ("privileged", board.privileged)):
+        for standing in standings:
+            entry, score = standing.entry, standing.score
+            k, n = standing.coverage(len(board.tasks))
+            gain = None if score is None else score.cooperation
+            row: dict[str, Any] = {
+                "id": entry.id,
+                "suite": entry.suite_name,
+                "suite_version": entry.suite_version,
+                **({} if track is None else {"suite_track": track}),
+                "rank": standing.rank if table == "ranked" else None,
+                "name": entry.name,
+                "authors": entry.authors,
+                "url": entry.url,
+                "track": entry.track,
+                "privileged": entry.privileged,
+                "deterministic": entry.deterministic,
+                "verified": entry.verified,
+                "trusted": entry.trusted,
+                "table": table,
+                "partial_rank": standing.rank if table == "partial" else None,
+                "separable_rank": standing.separable_rank,
+                "times_uniform": score.times if score else None,
+                "times_ci_low": score.times_ci[0] if score else None,
+                "times_ci_high": score.times_ci[1] if score else None,
+                "S": score.S if score else None,
+                **({} if track is None else {
+                    "cooperation_times": None if gain is None else 2.0**gain.S,
+                    "cooperation_ci_low": None if gain is None else 2.0**gain.ci_low,
+                    "cooperation_ci_high": None if gain is None else 2.0**gain.ci_high,
+                    "C": None if gain is None else gain.S,
+                }),
+                "iqm_gain": score.iqm if score else None,
+                "gap_closed": score.gap_closed if score else None,
+                "tasks_covered": k,
+                "tasks_total": n,
+                "uniform_rmse_filled": standing.filled,
+                "delay_ms": entry.delay_ms,
+                "energy_j": entry.energy_j,
+                "jitter": entry.jitter,
+            }
+            for task in board.tasks:
+                t = score.tasks.get(task) if score else None
+                row[f"times[{task}]"] = None if t is None else 2.0**t.mean
+                row[f"gap_closed[{task}]"] = None if t is None else t.gap_closed
+                row[f"rmse[{task}]"] = task_rmse(entry, task)
+            row.update(
+                entry_point=entry.entry_point,
+                method_hash=entry.method_hash,
+                created_utc=entry.created_utc.isoformat(),
+            )
+            rows.append(row)
     return rows
 
 
@@ -293,7 +387,10 @@ def _csv_safe(value: Any) -> Any:
 def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | None = None) -> str:
     """The leaderboard as CSV or JSON text.
 
-    One row per submission, in board order: suite, rank (empty outside the ranked table),
+    One row per submission and board, in board order: a v1 suite's board, or each track's board of a
+    benchmark v2 suite (scores never mix tracks: such a row carries ``suite_track`` and is scored on
+    that track's tasks only, with the cooperation gain ``cooperation_times`` = 2^C, its CI and ``C``).
+    Then: suite, rank (empty outside the ranked table),
     metadata, ``table`` (``ranked``, ``partial`` or ``privileged``), ``partial_rank`` and
     ``separable_rank`` (1 + the ranked methods ahead beyond doubt; empty outside the ranked table),
     the score (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
