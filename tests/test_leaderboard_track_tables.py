@@ -20,7 +20,7 @@ from swarmloc.leaderboard.site import ranking, views
 from swarmloc.leaderboard.store.database import LeaderboardStore
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_leaderboard_tracks import COOPERATIVE, ROBUST, UNIFORM, v2_entries  # noqa: E402
+from test_leaderboard_tracks import COOPERATIVE, ROBUST, UNIFORM, v2_entries
 
 TRACKS = ("cooperative", "robust-ranging")
 
