@@ -208,7 +208,7 @@ def test_fences_are_read_as_a_reader_sees_them() -> None:
 def test_the_readme_is_a_front_door() -> None:
     text = README.read_text(encoding="utf-8")
     assert len(text.splitlines()) <= README_MAX_LINES, f"README.md has {len(text.splitlines())} lines"
-    for shown in ("make demo", "make test", "torch==2.13.0", 'gym.make("swarmloc/NLOS-v1")', "swarmloc submit",
+    for shown in ("make demo", "make test", "torch==2.13.0", 'gym.make("swarmloc/Scale8-v2")', "swarmloc submit",
                   "docs/index.md"):
         assert shown in text, f"README.md does not show {shown!r}"
 
