@@ -51,6 +51,7 @@ def run(opts: Options) -> int:
     from swarmloc.bench.evaluation.backends import check_backend
     from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate
     from swarmloc.bench.scoring.score import suite_score
+    from swarmloc.bench.scoring.tracks import tasks_by_track
     from swarmloc.bench.evaluation.suites import get_suite, require_data, restrict_tasks
 
     console = Console(stderr=True)
@@ -95,11 +96,18 @@ def run(opts: Options) -> int:
         closed = "" if t.gap_closed is None else f"   gap closed {100 * t.gap_closed:4.0f}%"
         console.print(f"  {task:34s} RMSE {rmse.mean:8.3f} m   {2.0 ** t.mean:6.2f}× uniform"
                       f"   bound {'—' if bound is None else f'{bound.mean:.3f} m'}{closed}")
-    if score is not None:
-        low, high = score.times_ci
-        k, n = score.coverage
-        closed = "—" if score.gap_closed is None else f"{100 * score.gap_closed:.0f}%"
-        console.print(f"score: {score.times:.2f}× lower error than the standard CEKF (95% CI [{low:.2f}, "
-                      f"{high:.2f}]), gap closed {closed}, IQM g {score.iqm:.2f}, tasks {k}/{n}")
+    # one score per benchmark v2 track (scores never mix tracks); a v0/v1 suite has one
+    by_track = tasks_by_track(results.aggregates)
+    for track, tasks in by_track.items():
+        part = score if track is None else suite_score(
+            [e.model_dump() for e in results.episodes if e.task in tasks], tasks, suite=results.suite.name)
+        if part is None:
+            continue
+        low, high = part.times_ci
+        k, n = part.coverage
+        closed = "—" if part.gap_closed is None else f"{100 * part.gap_closed:.0f}%"
+        label = "score" if track is None else f"score, {track} track"
+        console.print(f"{label}: {part.times:.2f}× lower error than the standard CEKF (95% CI [{low:.2f}, "
+                      f"{high:.2f}]), gap closed {closed}, IQM g {part.iqm:.2f}, tasks {k}/{n}")
     console.print(f"wrote {opts.out} ({len(results.episodes)} episodes, {time.perf_counter() - started:.1f} s)")
     return 0

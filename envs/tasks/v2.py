@@ -8,7 +8,8 @@ in one update), and names its board (``TaskSpec.track``):
 * **cooperative** (the headline): swarms whose peers carry information the anchors,
   landmarks or GNSS do not: anchors that only reach part of the swarm (Scale), a cascaded
   IMU fault under non-coplanar anchors (CascadedFault), cameras lost on some UAVs while the
-  others still see (VisionLoss);
+  others still see (VisionLoss), GNSS-denied followers leaning on leaders whose GNSS drifts
+  (GradualFault, federated);
 * **robust-ranging** (its own board): one UAV against faulty anchor ranging (AnchorNLOS,
   TDOA), beside the real flights (``real-v1``).
 
@@ -32,8 +33,9 @@ from typing import Callable
 
 from swarmloc.envs.tasks.catalogue import EIGHT_ANCHORS, ideal, scale, tdoa
 from swarmloc.envs.tasks.nlos_fit_values import UTIL_NLOS_TDOA, UTIL_NLOS_TWR
-from swarmloc.envs.tasks.specs import NlosGaussMarkov, TaskSpec, VisionOutage
-from swarmloc.envs.tasks.v1 import (cascaded_fault_random_shifted_v1, cascaded_fault_random_v1, cascaded_fault_v1,
+from swarmloc.envs.tasks.specs import GpsDriftRandom, NlosGaussMarkov, TaskSpec, VisionOutage
+from swarmloc.envs.tasks.v1 import (GPS_DRIFT_SHIFTED, GPS_DRIFT_TRAIN, cascaded_fault_random_shifted_v1,
+                                    cascaded_fault_random_v1, cascaded_fault_v1, gradual_fault_v1,
                                     vision_loss_random_shifted_v1, vision_loss_random_v1, vision_loss_v1)
 
 #: the NLOS process of the two-way-ranging v2 tasks: the UTIL TWR fit, one state per peer link (module docstring)
@@ -169,6 +171,59 @@ def vision_loss_random_shifted_v2() -> TaskSpec:
     return _vision_random(vision_loss_random_shifted_v1(), VISION_BLIND_SHIFTED)
 
 
+#: GradualFault-v2: three leaders with a GNSS receiver, three followers without one
+FEDERATED_LEADERS = (0, 1, 2)
+FEDERATED_FOLLOWERS = (3, 4, 5)
+#: the leaders' GNSS error is a Gauss–Markov process with this correlation time [s]: a single-frequency
+#: receiver's position error (ionosphere, multipath, orbit and clock) is correlated over minutes; the measured
+#: autocorrelation of a consumer receiver bends at about one minute (``Sensors.gps_correlation_time``'s sources)
+FEDERATED_GPS_TAU = 60.0
+
+
+def gradual_fault_v2() -> TaskSpec:
+    """Three leaders with GNSS and three followers without it, in GradualFault-v1's formation; one leader's fix drifts.
+
+    federated §5's formation and drift, with the followers GNSS-denied (under a canopy, in a
+    jammed band): six UAVs fly the slow turning line 100 m up, leaders 0, 1, 2 in front
+    (``FEDERATED_LEADERS``), followers 3, 4, 5 (``FEDERATED_FOLLOWERS``) further out on the
+    sides. Each follower measures its position relative to every leader, and the leaders to
+    each other (UWB range and angle of arrival, σ 1.5 m per axis at 30 m, GradualFault-v1's);
+    only the leaders have a fix (σ 1 m per axis, the paper's leader receiver), whose error is
+    correlated in time (Gauss–Markov, τ ``FEDERATED_GPS_TAU`` s) as a real receiver's is. From
+    100 s to 200 s leader 0's fix drifts at 0.1 m/s per axis (the paper's drift; the offset
+    stays after the window). The followers are scored: everything they know of where they
+    are comes through the leaders, so a method must tell the drifting leader from the two
+    that agree.
+    """
+    base = gradual_fault_v1()
+    n = len(FEDERATED_LEADERS) + len(FEDERATED_FOLLOWERS)
+    sensors = base.sensors.model_dump()
+    sensors.update(gps_sigma=(1.0,) * n, gps_nodes=FEDERATED_LEADERS, gps_correlation_time=FEDERATED_GPS_TAU)
+    sensors["peers"] = {**sensors["peers"], "leaders": FEDERATED_LEADERS}
+    drift = base.faults.gps_drifts[0].model_dump()
+    drift["nodes"] = (0,)
+    return _v2(base, "cooperative", n_uav=n, sensors=sensors, faults={"gps_drifts": [drift]},
+               scoring={**base.scoring.model_dump(), "nodes": FEDERATED_FOLLOWERS})
+
+
+def _gradual_random(name: str, drift: dict) -> TaskSpec:
+    base = gradual_fault_v2()
+    random = GpsDriftRandom(**{**drift, "nodes": FEDERATED_LEADERS, "n_drifting_range": (1, 1)})
+    return _v2(base, "cooperative", name=name, faults={"gps_drift_random": random.model_dump()},
+               scoring={**base.scoring.model_dump(), "fault_window": None})
+
+
+def gradual_fault_random_v2() -> TaskSpec:
+    """GradualFault-v2 with the drift drawn per episode: which leader, when (50–150 s), how long (50–100 s), how fast
+    (0.05–0.25 m/s) and where to (GradualFaultRandom-v1's ranges, one leader of three)."""
+    return _gradual_random("GradualFaultRandom", GPS_DRIFT_TRAIN)
+
+
+def gradual_fault_random_shifted_v2() -> TaskSpec:
+    """GradualFaultRandom-v2 shifted: a spoofer's drag-off at 0.3–0.5 m/s (GradualFaultRandomShifted-v1's)."""
+    return _gradual_random("GradualFaultRandomShifted", GPS_DRIFT_SHIFTED)
+
+
 # --------------------------------------------------------------------------- robust ranging
 
 
@@ -220,6 +275,9 @@ CATALOGUE_V2: dict[str, Callable[[], TaskSpec]] = {
     "swarmloc/VisionLoss-v2": vision_loss_v2,
     "swarmloc/VisionLossRandom-v2": vision_loss_random_v2,
     "swarmloc/VisionLossRandomShifted-v2": vision_loss_random_shifted_v2,
+    "swarmloc/GradualFault-v2": gradual_fault_v2,
+    "swarmloc/GradualFaultRandom-v2": gradual_fault_random_v2,
+    "swarmloc/GradualFaultRandomShifted-v2": gradual_fault_random_shifted_v2,
     "swarmloc/AnchorNLOS-v2": anchor_nlos_v2,
     "swarmloc/AnchorNLOSRandom-v2": anchor_nlos_random_v2,
     "swarmloc/AnchorNLOSRandomShifted-v2": anchor_nlos_random_shifted_v2,
@@ -241,6 +299,11 @@ HISTORY_V2: dict[str, str] = {
     **{task: "v2: the cameras of half the swarm fail, not every camera at once (dtvirm §4.3), peers fused by split "
              "covariance intersection."
        for task in ("swarmloc/VisionLoss-v2", "swarmloc/VisionLossRandom-v2", "swarmloc/VisionLossRandomShifted-v2")},
+    **{task: "v2: three leaders with GNSS (its error correlated in time, τ 60 s) and three GNSS-denied followers "
+             "that lean on them, one leader's fix drifting, peers fused by split covariance intersection (v1: one "
+             "leader, followers with their own GPS)."
+       for task in ("swarmloc/GradualFault-v2", "swarmloc/GradualFaultRandom-v2",
+                    "swarmloc/GradualFaultRandomShifted-v2")},
     **{task: "v2: new, the robust-ranging board's simulated anchor NLOS (one UAV)."
        for task in ("swarmloc/AnchorNLOS-v2", "swarmloc/AnchorNLOSRandom-v2", "swarmloc/AnchorNLOSRandomShifted-v2")},
     "swarmloc/TDOA-v2": "v2: one UAV (the robust-ranging board) instead of four without peers, and the pair NLOS "
