@@ -103,6 +103,8 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("adaptive-pf", f"{_P}:make_adaptive_pf", "B", "ESS-adaptive particle count in [100, 800] (pf-nn §3.3)"),
     MethodEntry("pf-nn", f"{_P}:make_pfnn", "B",
                 "adaptive PF + 6–12–1 weight-correcting network, trained offline (pf-nn §3.4)"),
+    MethodEntry("isam2-robust", "swarmloc.agents.estimators.isam2:isam2_robust", "B",
+                "fixed-lag (2 s) iSAM2 smoother over the swarm, Huber factors (gtsam; 'factorgraph' extra)"),
     MethodEntry("mappo", f"{_M}:mappo", "A",
                 "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing"),
     MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", "MAPPO, raw α without smoothing (madrl Exp. 6)"),

@@ -22,7 +22,8 @@ EXTRA_MODULES: dict[str, frozenset[str]] = {
     "postgresql": frozenset({"sqlalchemy", "psycopg"}),
     "train": frozenset({"torch", "tensordict", "torchrl", "tensorboard"}),
     "explain": frozenset({"torch", "tensordict", "torchrl", "captum"}),
-    "all": frozenset({"torch", "tensordict", "torchrl", "tensorboard", "sqlalchemy", "captum"}),
+    "factorgraph": frozenset({"gtsam"}),
+    "all": frozenset({"torch", "tensordict", "torchrl", "tensorboard", "sqlalchemy", "captum", "gtsam"}),
 }
 
 #: the extra of a command (by its first word) that covers everything it imports in the common case
