@@ -53,6 +53,8 @@ class MethodEntry:
         summary: one line for tables and ``--help``.
         privileged: reads fault labels (shown apart, never ranked).
         deterministic: re-running an episode reproduces it exactly.
+        privileged_training: its shipped weights were fitted to privileged labels (fault or error
+            labels, read while training only); it runs without them (``privileged`` False, ranked).
     """
 
     name: str
@@ -61,6 +63,7 @@ class MethodEntry:
     summary: str
     privileged: bool = False
     deterministic: bool = True
+    privileged_training: bool = False
 
 
 _A = "swarmloc.agents.trust.classical"
@@ -106,14 +109,20 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("isam2-robust", "swarmloc.agents.estimators.isam2:isam2_robust", "B",
                 "fixed-lag (2 s) iSAM2 smoother over the swarm, Huber factors (gtsam; 'factorgraph' extra)"),
     MethodEntry("mappo", f"{_M}:mappo", "A",
-                "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing"),
-    MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", "MAPPO, raw α without smoothing (madrl Exp. 6)"),
+                "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing",
+                privileged_training=True),
+    MethodEntry("mappo-no-smoothing", f"{_M}:mappo_no_smoothing", "A", "MAPPO, raw α without smoothing (madrl Exp. 6)",
+                privileged_training=True),
     MethodEntry("mappo-no-isolation", f"{_M}:mappo_no_isolation", "A",
                 "MAPPO with trust fixed at 1 (madrl Exp. 6 no evaluation)"),
     MethodEntry("mappo-accuracy-only", f"{_M}:mappo_accuracy_only", "A",
-                "MAPPO trained on the accuracy term only (madrl Exp. 7)"),
+                "MAPPO trained on the accuracy term only (madrl Exp. 7)", privileged_training=True),
     MethodEntry("mappo-set-gru", "swarmloc.agents.mappo.set_gru_policy:mappo_set_gru", "A",
-                "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)"),
+                "MAPPO, actor with DeepSets over a UAV's channels + per-channel GRU memory (v1 randomized families)",
+                privileged_training=True),
+    MethodEntry("supervised-trust", "swarmloc.agents.trust.supervised:supervised_trust", "A",
+                "α = 1 − P(error label) of a per-channel MLP fitted to the labels, no RL (v2 randomized families)",
+                privileged_training=True),
     MethodEntry("oracle", f"{_A}:oracle_policy", "A",
                 "privileged: α_min on channels with an error label (the trust ceiling)", privileged=True),
     MethodEntry("centralized-oracle", "swarmloc.agents.estimators.centralized:centralized_oracle", "B",

@@ -59,6 +59,7 @@ COMMANDS: CommandTable = {
         "mappo": "swarmloc.cli.train_mappo",
         "mappo-set-gru": "swarmloc.cli.train_set_gru",
         "pfnn": "swarmloc.cli.train_pfnn",
+        "supervised-trust": "swarmloc.cli.train_supervised_trust",
     },
     "reproduce": {
         "madrl": "swarmloc.cli.reproduce:Madrl",
