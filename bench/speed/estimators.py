@@ -1,4 +1,4 @@
-"""Speed of the Track B particle filters on identical recorded inputs, in one run.
+"""Speed of the Track B particle filters (and the factor-graph smoother) on identical recorded inputs, in one run.
 
 Rows (``impl``), all on the same recorded Indoor-v0 measurements (6 UAVs, B episodes):
 
@@ -10,7 +10,9 @@ Rows (``impl``), all on the same recorded Indoor-v0 measurements (6 UAVs, B epis
 * ``pf``, ``pf-800``, ``adaptive-pf`` and ``pf-nn`` (adaptive) as shipped, and ``cekf``
   (the uniform-trust CEKF predict + update kernels) — the time-per-step column of
   pf-nn Table 5;
-* ``pf-nn`` at B = 32 (not in quick mode): batching throughput.
+* ``pf-nn`` at B = 32 (not in quick mode): batching throughput;
+* ``isam2-robust`` as shipped (the fixed-lag gtsam smoother, marginal covariances included), where
+  gtsam (the ``factorgraph`` extra) is installed.
 
 Each time is taken per step over ``steps`` consecutive filter steps (the estimator's
 ``step`` only; measurements are recorded and captured beforehand); ``ms_per_step`` is
@@ -198,6 +200,13 @@ def measure_rows(quick: bool = False) -> list[dict]:
         t, particles = time_estimator(make, rec, repeats)
         rows.append(_row(impl, 1, n, t, particles=particles))
     rows.append(_row("cekf", 1, n, time_cekf(rec, repeats)))
+    try:
+        from swarmloc.agents.estimators.isam2 import ISAM2Robust
+    except ModuleNotFoundError:  # the factorgraph extra is optional: no row without it
+        pass
+    else:
+        t, _ = time_estimator(ISAM2Robust, rec, max(1, repeats - 1))
+        rows.append(_row("isam2-robust", 1, n, t))
     if not quick:
         big = record(32, 50)
         t, _ = time_estimator(lambda: ParticleFilter(fixed, network=net, name="pf-nn"), big, 2)
