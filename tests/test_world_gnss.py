@@ -47,10 +47,13 @@ def gps_errors(world: World, n_steps: int) -> np.ndarray:
 
 
 def test_new_fields_stay_out_of_every_registered_specs_json():
+    # the v0 and v1 specs (and their suites' hashes) predate the fields; the GradualFault-v2 family uses them
     for task_id in CATALOGUE:
-        text = get_spec(task_id).model_dump_json()
+        spec = get_spec(task_id)
+        text = spec.model_dump_json()
+        uses = spec.version >= 2 and spec.name.startswith("GradualFault")
         for name in ("gps_nodes", "gps_correlation_time", "leaders"):
-            assert f'"{name}"' not in text, (task_id, name)
+            assert (f'"{name}"' in text) == uses, (task_id, name)
 
 
 def test_new_fields_round_trip_through_json():
