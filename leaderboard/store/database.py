@@ -92,7 +92,7 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 _SHIPPED_TRACK_A: tuple[str, ...] = (
     "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "non-cooperative",
     "random", "oracle",
-    "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only", "mappo-set-gru",
+    "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only", "mappo-set-gru", "supervised-trust",
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (
     "dead-reckoning", "imm-kf", "imm-ekf", "imm-arkf", "federated", "federated-fdi", "ci-ekf", "ci-ekf-no-aa",
