@@ -11,11 +11,19 @@ import numpy as np
 import pytest
 
 from swarmloc.agents.protocols import LinkTrustPolicy, TrustInput
-from swarmloc.agents.trust.supervised import (FEATURE_NAMES, HISTORY, WEIGHTS_PATH, ChannelHistory,
-                                              ClassifierWeights, SupervisedTrust, supervised_trust)
+from swarmloc.agents.trust.supervised import (
+    FEATURE_NAMES,
+    HISTORY,
+    WEIGHTS_PATH,
+    ChannelHistory,
+    ClassifierWeights,
+    SupervisedTrust,
+    supervised_trust,
+)
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.core import LinkTrustCore
-from swarmloc.envs.world.observation import NIS, N_FEATURES as N_OBS, VALID, build_observation, kind_one_hot
+from swarmloc.envs.world.observation import N_FEATURES as N_OBS
+from swarmloc.envs.world.observation import NIS, VALID, build_observation, kind_one_hot
 
 REPO = Path(__file__).resolve().parents[1]
 PREV = FEATURE_NAMES.index("nis_prev1")

@@ -33,10 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmloc.agents.protocols import TrustInput
 from swarmloc.envs.tasks.channels import N_KINDS, ChannelLayout
 from swarmloc.envs.world.observation import DISTANCE, INNOVATION, JERK, KIND0, NIS, VALID, kind_one_hot
-
-from swarmloc.agents.protocols import TrustInput
 
 #: previous steps of a channel's NIS in its features
 HISTORY = 4
@@ -147,7 +146,7 @@ class ClassifierWeights:
                  history=np.array(self.history), feature_names=np.array(FEATURE_NAMES), **arrays)
 
     @classmethod
-    def load(cls, path: str | Path) -> "ClassifierWeights":
+    def load(cls, path: str | Path) -> ClassifierWeights:
         """Read weights written by :meth:`save`.
 
         Raises:

@@ -24,11 +24,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import rankdata
 
+from swarmloc.agents.trust.supervised import FEATURE_NAMES, HISTORY, ChannelHistory, ClassifierWeights
 from swarmloc.envs.tasks.catalogue import get_spec
 from swarmloc.envs.world.core import LinkTrustCore
 from swarmloc.envs.world.observation import build_observation, kind_one_hot
-
-from swarmloc.agents.trust.supervised import FEATURE_NAMES, HISTORY, ChannelHistory, ClassifierWeights
 
 #: the step's squashed NIS among the features (the held-out baseline's score)
 _NIS_COLUMN = FEATURE_NAMES.index("nis")
