@@ -96,7 +96,7 @@ _SHIPPED_TRACK_A: tuple[str, ...] = (
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (
     "dead-reckoning", "imm-kf", "imm-ekf", "imm-arkf", "federated", "federated-fdi", "ci-ekf", "ci-ekf-no-aa",
-    "pf", "pf-800", "adaptive-pf", "pf-nn", "centralized-oracle",
+    "pf", "pf-800", "adaptive-pf", "pf-nn", "centralized-oracle", "isam2-robust",
 )
 
 SHIPPED_REFERENCE_METHODS: frozenset[str] = frozenset(
