@@ -26,6 +26,10 @@ WITHOUT_V1_RESULTS: dict[str, str] = {
     "ci-ekf-no-aa": "as ci-ekf",
     "centralized-oracle": "the benchmark v2 reference (docs/methods.md): its results ship with the v2 suite, "
                           "not on the frozen standard-v1",
+    "isam2-robust": "new with benchmark v2 (docs/methods.md): its results ship with the v2 suite, not on the frozen "
+                    "standard-v1",
+    "supervised-trust": "new with benchmark v2, trained on the v2 training families (docs/learned.md): its results ship "
+                        "with the v2 suite, not on the frozen standard-v1",
 }
 
 
