@@ -210,13 +210,16 @@ STANDARD_V2_TASKS: tuple[str, ...] = (
     "swarmloc/Scale32-v2",
     "swarmloc/ScaleRandom-v2",
     "swarmloc/ScaleRandomShifted-v2",
+    "swarmloc/GradualFault-v2",
+    "swarmloc/GradualFaultRandom-v2",
+    "swarmloc/GradualFaultRandomShifted-v2",
     "swarmloc/AnchorNLOS-v2",
     "swarmloc/AnchorNLOSRandom-v2",
     "swarmloc/AnchorNLOSRandomShifted-v2",
     "swarmloc/TDOA-v2",
 )
 #: SHA-256 of docs/calibration-v2.json's rows (``calibration_v2.rows_sha256``), covered by the v2 suites' hashes
-CALIBRATION_V2_SHA256 = "4093119bccc8ceab6a21d435be35a928c402170798c0ef2e4a78c51582124d21"
+CALIBRATION_V2_SHA256 = "4a84d54ac827ffa670e26ff6597b66299e071519a051214b8027477f7090fb93"
 
 
 def _v2_specs(tasks: Iterable[str]) -> tuple[str, ...]:

@@ -71,16 +71,14 @@ information of the noise density, so R_c⁻¹ ⪰ I_v keeps it a lower bound:
   σ (std 0.91 / 0.77 / 0.72 m at a = 0.1 / 0.3 / 0.5 against 1 m), so its Fisher information
   exceeds 1/σ² and on those tasks the bound is not strictly a lower bound.
 
-GNSS error correlated in time (``Sensors.gps_correlation_time`` > 0): not modelled, a limitation.
-The bound takes every fix as white, R_c = σ², independent of the last one. A Gauss–Markov error
-of the same stationary σ carries less position information over a run of fixes (averaging
-n fixes shrinks a white error by √n, a correlated one by much less while n·dt ≲ τ), so on
-such a task the bound credits the fixes with information they do not have and reads low
-(optimistic); it is no longer the PCRLB of the simulated world, and no statement that it
-bounds every estimator holds there (a differenced pair of correlated fixes, on the other
-hand, tells the velocity better than a white pair). Modelling it would add the 3 error
-states of each receiver to the joint state (e⁺ = φ e + w, z = p + e), which the fast path's
-position-only measurement structure does not take as it stands.
+GNSS error correlated in time (``Sensors.gps_correlation_time`` > 0). A Gauss–Markov error of the
+same stationary σ carries less position information over a run of fixes than white noise
+(averaging n fixes shrinks a white error by √n, a correlated one by much less while n·dt ≲ τ), so
+taking the fixes as white would credit them with information they do not have. On such a task
+``pcrlb`` runs ``bound_gnss.pcrlb_correlated_gnss``: the same recursion, dense, with the 3 error
+states of each receiver in the joint state (ε⁺ = φ ε + w, z = p + ε), which the fast path's
+position-only measurement structure does not take. (Added with the first task that has such a
+receiver, GradualFault-v2, before any result of it shipped; every other task's bound is unchanged.)
 
 Fast path. The dynamics are linear, so the recursion is a Kalman covariance recursion with
 the expected information. ``pcrlb`` runs it in covariance form C = J⁻¹ on the blocks
@@ -148,6 +146,8 @@ class BoundInputs(NamedTuple):
         anchors: ``(A, 3)``; landmarks ``(M, 3)`` [m].
         pos: ``(T, B, N, 3)`` true positions at steps 1 … T [m].
         use: ``(T, B, N, L)`` bool: the channel-step enters (present and not labelled faulty).
+        gps_tau: the GNSS error's correlation time [s] (``Sensors.gps_correlation_time``); 0: white fixes (the
+            fast path); > 0: the receivers' errors are states (``bound_gnss``).
     """
 
     dt: float
@@ -162,6 +162,7 @@ class BoundInputs(NamedTuple):
     landmarks: np.ndarray
     pos: np.ndarray
     use: np.ndarray
+    gps_tau: float = 0.0
 
 
 class Pcrlb(NamedTuple):
@@ -306,7 +307,7 @@ class BoundRecorder:
             p0_diag=np.array([f.init_pos_sigma**2] * 3 + [f.init_vel_sigma**2] * 3),
             kind=np.ascontiguousarray(lay.kind), target=np.ascontiguousarray(lay.target),
             r0=np.ascontiguousarray(lay.r0), anchors=self.anchors, landmarks=self.landmarks, pos=self.pos,
-            use=self.use)
+            use=self.use, gps_tau=float(self.spec.sensors.gps_correlation_time))
 
 
 def record_inputs(spec: TaskSpec, seeds: np.ndarray | list[int],
@@ -367,6 +368,10 @@ def pcrlb(inputs: BoundInputs) -> Pcrlb:
     Returns:
         ``Pcrlb`` (pos_var ``(T, B, N)``, failed_at ``(B,)``).
     """
+    if inputs.gps_tau > 0:  # correlated GNSS errors: their states in a dense recursion (bound_gnss)
+        from swarmloc.envs.filter.bound_gnss import pcrlb_correlated_gnss
+
+        return pcrlb_correlated_gnss(inputs)
     n_t, n_b, n = inputs.pos.shape[:3]
     pos_var = np.full((n_t, n_b, n), np.nan)
     failed_at = np.full(n_b, -1, dtype=np.int64)
