@@ -51,8 +51,8 @@ def run(opts: Options) -> int:
     """Run the demo."""
     from swarmloc.agents.registry import method_names
     from swarmloc.bench.evaluation.backends import check_backend
-    from swarmloc.bench.reports.demo import run_demo
     from swarmloc.bench.evaluation.suites import get_suite
+    from swarmloc.bench.reports.demo import run_demo
 
     if opts.leaderboard:
         # the CLI is every room's front door: only its handlers reach the leaderboard. Imported
@@ -90,8 +90,8 @@ def run_real_flight_demo(methods: list[str], out: Path, workers: int, plots: boo
     from rich.console import Console
     from rich.markup import escape
 
-    from swarmloc.bench.reports.demo import run_demo
     from swarmloc.bench.evaluation.suites import Suite, get_suite, missing_data
+    from swarmloc.bench.reports.demo import run_demo
 
     suite = get_suite(suite_name)
     missing = missing_data(suite)

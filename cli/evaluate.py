@@ -47,12 +47,12 @@ def run(opts: Options) -> int:
     from rich.console import Console
     from rich.markup import escape
 
-    from swarmloc.cli.extras import missing_extra
     from swarmloc.bench.evaluation.backends import check_backend
     from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate
+    from swarmloc.bench.evaluation.suites import get_suite, require_data, restrict_tasks
     from swarmloc.bench.scoring.score import suite_score
     from swarmloc.bench.scoring.tracks import tasks_by_track
-    from swarmloc.bench.evaluation.suites import get_suite, require_data, restrict_tasks
+    from swarmloc.cli.extras import missing_extra
 
     console = Console(stderr=True)
     if ":" in opts.method and os.getcwd() not in sys.path:

@@ -14,8 +14,9 @@ from swarmloc.envs.filter.bound import pcrlb
 from swarmloc.envs.filter.bound_gnss import WHITE_SHARE, pcrlb_correlated_gnss
 from swarmloc.envs.filter.cekf_reference import transition
 from swarmloc.envs.tasks.channels import GPS
+
 sys.path.insert(0, str(Path(__file__).parent))
-from test_bound import synthetic  # noqa: E402
+from test_bound import synthetic
 
 
 def augmented_kalman(n_t, dt, imu_sigma, p0, var, tau):

@@ -13,12 +13,18 @@ from swarmloc.bench.scoring.families import task_split
 from swarmloc.envs.adapters.task_envs import _HISTORY
 from swarmloc.envs.tasks.catalogue import CATALOGUE, get_spec
 from swarmloc.envs.tasks.channels import ANCHOR, LANDMARK
-from swarmloc.envs.tasks.v2 import (CASCADED_TOP_ANCHOR, CATALOGUE_V2, HISTORY_V2, SCALE_ANCHOR_RANGE, VISION_BLIND,
-                                    VISION_BLIND_SHIFTED)
+from swarmloc.envs.tasks.v2 import (
+    CASCADED_TOP_ANCHOR,
+    CATALOGUE_V2,
+    HISTORY_V2,
+    SCALE_ANCHOR_RANGE,
+    VISION_BLIND,
+    VISION_BLIND_SHIFTED,
+)
 from swarmloc.envs.world.sim import World
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_world import rollout  # noqa: E402
+from test_world import rollout
 
 V2_TASKS = sorted(CATALOGUE_V2)
 

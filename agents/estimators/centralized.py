@@ -78,11 +78,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.envs.filter.cekf_reference import transition
-from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
-
 from swarmloc.agents.estimators.dead_reckoning import cekf_prior
 from swarmloc.agents.protocols import EstimatorOutput, Measurements, PrivilegedInfo, TaskFacts
+from swarmloc.envs.filter.cekf_reference import transition
+from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
 #: a range shorter than this has no direction: the channel is skipped (as the CEKF does)
 _MIN_RANGE = 1e-9
@@ -393,8 +392,7 @@ class CentralizedOracle:
         rest; where it fell (a window closed) the offset is 0 and certain again at the new σ_f² (0 when no
         other window of the UAV stays open: overlapping windows are rare, and a closing one's share of the
         estimate cannot be told apart)."""
-        n_b, n = variance.shape
-        n3 = 3 * n
+        n3 = 3 * variance.shape[1]
         base = self.fault_block * n3
         rose = variance > self.fault_variance
         fell = variance < self.fault_variance

@@ -40,8 +40,8 @@ from swarmloc.agents.protocols import (
 )
 from swarmloc.agents.registry import LoadedMethod
 from swarmloc.envs.adapters.trust_env import TrustEnvBatch
-from swarmloc.envs.tasks.channels import ChannelLayout
 from swarmloc.envs.filter.bound import fault_variance
+from swarmloc.envs.tasks.channels import ChannelLayout
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.world.reward import RewardTerms
 from swarmloc.envs.world.sim import validate_seeds

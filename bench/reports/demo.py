@@ -21,14 +21,14 @@ from rich.markup import escape
 from rich.table import Table
 
 from swarmloc.bench.common.files import write_text_atomic
-from swarmloc.bench.reports.markdown import markdown_table
 from swarmloc.bench.evaluation.backends import Backend
-from swarmloc.bench.reports.plots import plot_results, short_name
 from swarmloc.bench.evaluation.results import Results, write_results
 from swarmloc.bench.evaluation.runner import EvaluationFailed, evaluate_methods, traces_path, write_traces
+from swarmloc.bench.evaluation.suites import Suite
+from swarmloc.bench.reports.markdown import markdown_table
+from swarmloc.bench.reports.plots import plot_results, short_name
 from swarmloc.bench.scoring.score import suite_score
 from swarmloc.bench.scoring.tracks import tasks_by_track
-from swarmloc.bench.evaluation.suites import Suite
 
 
 @dataclass(frozen=True)

@@ -29,24 +29,32 @@ simulated TDOA room's is the fit to the UTIL TDOA flights (``UTIL_NLOS_TDOA``).
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from swarmloc.envs.tasks.catalogue import EIGHT_ANCHORS, ideal, scale, tdoa
 from swarmloc.envs.tasks.nlos_fit_values import UTIL_NLOS_TDOA, UTIL_NLOS_TWR
 from swarmloc.envs.tasks.specs import GpsDriftRandom, NlosGaussMarkov, TaskSpec, VisionOutage
-from swarmloc.envs.tasks.v1 import (GPS_DRIFT_SHIFTED, GPS_DRIFT_TRAIN, cascaded_fault_random_shifted_v1,
-                                    cascaded_fault_random_v1, cascaded_fault_v1, gradual_fault_v1,
-                                    vision_loss_random_shifted_v1, vision_loss_random_v1, vision_loss_v1)
+from swarmloc.envs.tasks.v1 import (
+    GPS_DRIFT_SHIFTED,
+    GPS_DRIFT_TRAIN,
+    cascaded_fault_random_shifted_v1,
+    cascaded_fault_random_v1,
+    cascaded_fault_v1,
+    gradual_fault_v1,
+    vision_loss_random_shifted_v1,
+    vision_loss_random_v1,
+    vision_loss_v1,
+)
 
 #: the NLOS process of the two-way-ranging v2 tasks: the UTIL TWR fit, one state per peer link (module docstring)
 NLOS_V2 = {**UTIL_NLOS_TWR, "peer_state": "per_link"}
 #: the randomized variants' draws per episode: onset rate uniform and mean bias log-uniform between the two UTIL
 #: fits (TWR: 1.0 /s around a near-zero mean, the heavy tail of a cluttered lab; TDOA: 0.22 /s around 0.52 m, the
 #: obstacle episodes behind wood, plastic and metal), and three links in four NLOS-prone
-NLOS_V2_TRAIN = dict(onset_rate_range=(0.2, 1.0), mean_bias_range=(0.01, 0.5), link_fraction=0.75)
+NLOS_V2_TRAIN = {"onset_rate_range": (0.2, 1.0), "mean_bias_range": (0.01, 0.5), "link_fraction": 0.75}
 #: the shifted split: denser and larger biases than either UTIL fit (every link prone, 1–2 onsets per second,
 #: mean bias 0.5–1.5 m: a hall cluttered with metal)
-NLOS_V2_SHIFTED = dict(onset_rate_range=(1.0, 2.0), mean_bias_range=(0.5, 1.5), link_fraction=1.0)
+NLOS_V2_SHIFTED = {"onset_rate_range": (1.0, 2.0), "mean_bias_range": (0.5, 1.5), "link_fraction": 1.0}
 #: UWB two-way ranging reaches an anchor within this distance in the v2 Scale hall: a DW1000 at
 #: its 6.8 Mb/s indoor setting holds a reliable link to about 10–15 m through a cluttered hall;
 #: 11 m reaches the near-wall anchors from anywhere on the 6 m circle and none across the hall
