@@ -252,8 +252,9 @@ class TrackScoreBlock(BaseModel):
     total: int = Field(ge=1)
 
 
-class ScoreBlock(BaseModel):
-    """The score of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts.
+class ScoreBlock(TrackScoreBlock):
+    """The score of the whole file: ``S`` (log2 units; ``2^S`` × lower error than uniform) and its parts
+    (a ``TrackScoreBlock``'s fields over every task the file ran, then these).
 
     Attributes:
         S, ci_low, ci_high: the suite score and its 95 % CI (score v1: stratified bootstrap;
@@ -269,16 +270,6 @@ class ScoreBlock(BaseModel):
             ``non-cooperative``'s RMSE per episode, which a file of another method does not hold.
     """
 
-    model_config = _FROZEN
-
-    S: float
-    ci_low: float
-    ci_high: float
-    times: float
-    iqm: float
-    gap_closed: float | None
-    covered: int = Field(ge=0)
-    total: int = Field(ge=1)
     tasks: dict[str, TaskScoreBlock]
     tracks: dict[str, TrackScoreBlock] | None = None
 

@@ -93,26 +93,37 @@ def evaluate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worker
     Raises:
         RuntimeError: a job failed (the message names the method, the task and the error).
     """
+    outcomes: dict[str, TaskOutcome] = {}
+    hybrid = [t for t in tasks if IMM[0] in methods_for(t)]
+    for methods, chosen in ((CLASSICAL, list(tasks)), (IMM, hybrid)):
+        run_methods(methods, tuple((t, s) for t in chosen for s in seeds[t]), outcomes, overrides=overrides,
+                    workers=workers, progress=progress)
+    return outcomes
+
+
+def run_methods(methods: Sequence[str], episodes: Sequence[tuple[str, int]], outcomes: dict[str, TaskOutcome], *,
+                overrides: Mapping[str, Any] | None = None, workers: int = 1, progress: bool = False) -> None:
+    """``methods`` on the (task, seed) ``episodes`` through the runner, merged by task into ``outcomes``.
+
+    Raises:
+        RuntimeError: a job failed (the message names the method, the task and the error).
+    """
     from swarmloc.bench.evaluation.runner import evaluate_methods
 
-    outcomes: dict[str, TaskOutcome] = {}
+    if not episodes:
+        return
 
     def keep(part: TaskOutcome) -> None:
         have = outcomes.setdefault(part.task, TaskOutcome(task=part.task, seeds=part.seeds))
         have.episodes.update(part.episodes)
         have.unsupported.update(part.unsupported)
 
-    hybrid = [t for t in tasks if IMM[0] in methods_for(t)]
-    for methods, chosen in ((CLASSICAL, list(tasks)), (IMM, hybrid)):
-        if not chosen:
-            continue
-        suite = Suite("calibration", "1", tuple((t, s) for t in chosen for s in seeds[t]), "calibration runs")
-        runs = evaluate_methods(list(methods), suite, workers=workers, trace=False, progress=progress, on_task=keep,
-                                overrides=overrides)
-        failed = [f"{m} on {t}: {e}" for m, r in runs.items() for t, e in r.failed.items()]
-        if failed:
-            raise RuntimeError("calibration runs failed:\n" + "\n".join(failed))
-    return outcomes
+    suite = Suite("calibration", "1", tuple(episodes), "calibration runs")
+    runs = evaluate_methods(list(methods), suite, workers=workers, trace=False, progress=progress, on_task=keep,
+                            overrides=overrides)
+    failed = [f"{m} on {t}: {e}" for m, r in runs.items() for t, e in r.failed.items()]
+    if failed:
+        raise RuntimeError("calibration runs failed:\n" + "\n".join(failed))
 
 
 def uniform_traces(spec: TaskSpec, seeds: Sequence[int]) -> tuple[list[Trace], list[np.ndarray]]:

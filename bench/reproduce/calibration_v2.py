@@ -47,8 +47,9 @@ import numpy as np
 from swarmloc.bench.common.files import write_text_atomic
 from swarmloc.bench.common.provenance import collect_provenance
 from swarmloc.bench.evaluation.outcomes import TaskOutcome
-from swarmloc.bench.evaluation.suites import DEV_SEED_START, Suite
+from swarmloc.bench.evaluation.suites import DEV_SEED_START
 from swarmloc.bench.reproduce import calibration_criteria as C
+from swarmloc.bench.reproduce.calibration import run_methods
 from swarmloc.bench.scoring.families import group_by_family, task_family, task_label, task_split
 from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
 from swarmloc.envs.tasks.specs import Faults, TaskSpec
@@ -105,23 +106,9 @@ def fault_free(spec: TaskSpec) -> dict[str, Any]:
 def _run(methods: Sequence[str], tasks: Sequence[str], seeds: Sequence[int], overrides: Mapping[str, Any] | None,
          workers: int, progress: bool) -> dict[str, TaskOutcome]:
     """``methods`` on ``tasks`` × ``seeds`` through the runner, with ``overrides`` on every task."""
-    from swarmloc.bench.evaluation.runner import evaluate_methods
-
     outcomes: dict[str, TaskOutcome] = {}
-
-    def keep(part: TaskOutcome) -> None:
-        have = outcomes.setdefault(part.task, TaskOutcome(task=part.task, seeds=part.seeds))
-        have.episodes.update(part.episodes)
-        have.unsupported.update(part.unsupported)
-
-    if not tasks:
-        return outcomes
-    suite = Suite("calibration-v2", "2", tuple((t, s) for t in tasks for s in seeds), "v2 calibration runs")
-    runs = evaluate_methods(list(methods), suite, workers=workers, trace=False, progress=progress, on_task=keep,
-                            overrides=overrides)
-    failed = [f"{m} on {t}: {e}" for m, r in runs.items() for t, e in r.failed.items()]
-    if failed:
-        raise RuntimeError("v2 calibration runs failed:\n" + "\n".join(failed))
+    run_methods(methods, tuple((t, s) for t in tasks for s in seeds), outcomes, overrides=overrides, workers=workers,
+                progress=progress)
     return outcomes
 
 

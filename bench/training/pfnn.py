@@ -14,16 +14,12 @@ episodes' truth reaches it.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-
 from swarmloc.agents.registry import WEIGHTS_DIR
-from swarmloc.bench.common.files import write_bytes_atomic
-from swarmloc.bench.common.provenance import collect_provenance
+from swarmloc.bench.training.weights_file import write_npz_with_record
 from swarmloc.envs.tasks.seeds import check_training_seeds
 
 if TYPE_CHECKING:
@@ -71,30 +67,16 @@ class TrainPfnnArgs:
 
 def write_weights(result: FitResult, args: TrainPfnnArgs, fit: FitConfig) -> Path:
     """Write ``args.weights_out`` (.npz) and its provenance (.json), each atomically."""
-    out = Path(args.weights_out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.building.npz")
-    result.weights.save(tmp)
-    data = tmp.read_bytes()
-    tmp.unlink()
-    write_bytes_atomic(out, data)
-    record = {
-        "method": "pf-nn",
-        "command": args.command(),
-        "provenance": collect_provenance().model_dump(mode="json"),
-        "weights_sha256": hashlib.sha256(data).hexdigest(),
-        "fit": {**{k: v for k, v in asdict(fit).items() if k != "filter"}, "seeds": list(fit.seeds),
-                "filter": asdict(fit.filter)},
-        "losses": result.losses,
-        "n_samples": result.n_samples,
-        "target_mean": result.target_mean,
-        "seconds": round(result.seconds, 1),
-        "note": ("Fitted offline on training seeds only, target exp(-||p - p_true||) (pf-nn eq. 15); "
-                 "frozen at evaluation. The paper's online training on ground truth is the separate, "
-                 "privileged method pf-nn-online-oracle."),
-    }
-    write_bytes_atomic(out.with_suffix(".json"), (json.dumps(record, indent=2) + "\n").encode())
-    return out
+    write_npz_with_record(
+        Path(args.weights_out), result.weights.save, "pf-nn", args.command(),
+        fit={**{k: v for k, v in asdict(fit).items() if k != "filter"}, "seeds": list(fit.seeds),
+             "filter": asdict(fit.filter)},
+        losses=result.losses, n_samples=result.n_samples, target_mean=result.target_mean,
+        seconds=round(result.seconds, 1),
+        note=("Fitted offline on training seeds only, target exp(-||p - p_true||) (pf-nn eq. 15); "
+              "frozen at evaluation. The paper's online training on ground truth is the separate, "
+              "privileged method pf-nn-online-oracle."))
+    return Path(args.weights_out)
 
 
 def train_pfnn(args: TrainPfnnArgs, log=print) -> Path:

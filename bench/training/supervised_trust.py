@@ -17,14 +17,11 @@ trust; held out: seeds 900000–900007 and 900000–900031 of the same tasks; 12
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from swarmloc.agents.registry import WEIGHTS_DIR
-from swarmloc.bench.common.files import write_bytes_atomic
-from swarmloc.bench.common.provenance import collect_provenance
+from swarmloc.bench.training.weights_file import write_npz_with_record
 from swarmloc.envs.tasks.seeds import check_training_seeds
 
 #: the shipped weights (``swarmloc.agents.trust.supervised.WEIGHTS_PATH``)
@@ -104,30 +101,16 @@ def train_supervised_trust(args: TrainSupervisedTrustArgs, log=print) -> Path:
                     epochs=args.epochs, lr=args.lr, torch_seed=args.torch_seed)
     result = fit(cfg, log=log)
     out = Path(args.weights_out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.building.npz")
-    result.weights.save(tmp)
-    data = tmp.read_bytes()
-    tmp.unlink()
-    write_bytes_atomic(out, data)
-    record = {
-        "method": "supervised-trust",
-        "command": args.command(),
-        "provenance": collect_provenance().model_dump(mode="json"),
-        "weights_sha256": hashlib.sha256(data).hexdigest(),
-        "fit": {**asdict(cfg), "training_seeds": {t: [s[0], s[-1]] for t, s in zip(TASKS, seeds)},
-                "heldout_seeds": {t: [s[0], s[-1]] for t, s in zip(TASKS, heldout)}},
-        "features": list(FEATURE_NAMES),
-        "data": result.data,
-        "losses": result.losses,
-        "heldout": result.heldout,
-        "seconds": round(result.seconds, 1),
-        "note": ("Fitted by binary cross-entropy to the error labels (privileged, read while training only) of "
-                 "uniform-trust rollouts on training seeds; no reward, no RL. At evaluation it reads the "
-                 "observation only: alpha = 1 - P(error label)."),
-    }
-    for key in ("seeds", "heldout_seeds"):  # the ranges above say the same in two numbers per task
-        record["fit"].pop(key)
-    write_bytes_atomic(out.with_suffix(".json"), (json.dumps(record, indent=2) + "\n").encode())
+    # the ranges say the same as the fit's seed lists in two numbers per task
+    fit_record = {k: v for k, v in asdict(cfg).items() if k not in ("seeds", "heldout_seeds")}
+    write_npz_with_record(
+        out, result.weights.save, "supervised-trust", args.command(),
+        fit={**fit_record, "training_seeds": {t: [s[0], s[-1]] for t, s in zip(TASKS, seeds)},
+             "heldout_seeds": {t: [s[0], s[-1]] for t, s in zip(TASKS, heldout)}},
+        features=list(FEATURE_NAMES), data=result.data, losses=result.losses, heldout=result.heldout,
+        seconds=round(result.seconds, 1),
+        note=("Fitted by binary cross-entropy to the error labels (privileged, read while training only) of "
+              "uniform-trust rollouts on training seeds; no reward, no RL. At evaluation it reads the "
+              "observation only: alpha = 1 - P(error label)."))
     log(f"wrote {out} and {out.with_suffix('.json')}")
     return out

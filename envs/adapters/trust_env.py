@@ -26,7 +26,7 @@ from swarmloc.envs.world.observation import N_FEATURES, build_observation, kind_
 from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward, team_reward
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.tasks.seeds import SEED_BOUND
-from swarmloc.envs.tasks.catalogue import CATALOGUE, canonical_task_id, get_spec
+from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
 
 #: reward terms reported per UAV in every adapter's info (names of ``RewardTerms`` fields)
 REWARD_TERMS = ("accuracy", "delay_penalty", "energy_penalty", "jitter_penalty", "flops", "delay_ms", "energy_j")
@@ -52,16 +52,18 @@ def build_spec(task_id: str, overrides: Mapping[str, Any]) -> TaskSpec:
         DeprecationWarning: a benchmark v1 task (frozen and deprecated: the v2 tasks measure cooperation on a
             consistent backbone), through Gymnasium's logger as its own out-of-date notice.
     """
-    task_id = canonical_task_id(task_id)
-    if task_id.endswith("-v1") and CATALOGUE[task_id]().trajectory.kind != "recorded":
-        logger.deprecation(f"{task_id} is a benchmark v1 task, frozen and deprecated: v1's CEKF fuses a neighbour's "
-                           "estimate as a known point and double counts. Use the -v2 tasks (docs/benchmark-v2.md).")
+    canonical_task_id(task_id)
     allowed = sorted(set(TaskSpec.model_fields) - set(_IDENTITY_FIELDS))
     unknown = sorted(set(overrides) - set(allowed))
     if unknown:
         raise TypeError(f"unknown argument(s) {unknown} for task {task_id!r}; spec fields that may be overridden: "
                         f"{allowed} (plus reward_weights, policy_flops, processor, render_mode)")
-    return get_spec(task_id, **overrides)
+    spec = get_spec(task_id, **overrides)
+    if spec.version == 1 and spec.trajectory.kind != "recorded":  # the version is the task's (not an override)
+        logger.deprecation(f"{spec.task_id} is a benchmark v1 task, frozen and deprecated: v1's CEKF fuses a "
+                           "neighbour's estimate as a known point and double counts. Use the -v2 tasks "
+                           "(docs/benchmark-v2.md).")
+    return spec
 
 
 def as_reward_weights(value: RewardWeights | Mapping[str, float] | None) -> RewardWeights:

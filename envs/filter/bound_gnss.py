@@ -26,7 +26,12 @@ import numpy as np
 import scipy.linalg
 
 from swarmloc.envs.filter.bound import BoundInputs, Pcrlb, distinct_episodes
-from swarmloc.envs.filter.bound_reference import joint_model, measurement_information
+from swarmloc.envs.filter.bound_reference import (
+    joint_model,
+    measurement_information,
+    position_variances,
+    predicted_covariance,
+)
 from swarmloc.envs.tasks.channels import GPS
 
 #: the white part the bound gives a correlated fix, as a share of its variance σ² (module docstring)
@@ -82,8 +87,7 @@ def pcrlb_correlated_gnss(inputs: BoundInputs) -> Pcrlb:
             F_s, Q_s = joint_model(n, w.dt, w.imu_sigma, has_bias, has_fault, fv[k] > 0, onset)
             F, Q = scipy.linalg.block_diag(F_s, F_e), scipy.linalg.block_diag(Q_s, Q_e)
             # C⁻ = Q + F J_{k−1}⁻¹ Fᵀ;  J_k = (C⁻)⁻¹ + Σ_c E[H_cᵀ R_c⁻¹ H_c]
-            C_prior = Q + F @ np.linalg.inv(J) @ F.T
-            C_prior = 0.5 * (C_prior + C_prior.T)
+            C_prior = predicted_covariance(J, F, Q)
             J = np.linalg.inv(C_prior)
             J[:d_swarm, :d_swarm] += measurement_information(
                 w.pos[k, b], use_other[k, b], w.kind, w.target, w.r0, w.anchors, w.landmarks,
@@ -92,14 +96,11 @@ def pcrlb_correlated_gnss(inputs: BoundInputs) -> Pcrlb:
                 if w.use[k, b, i, gps_slot[i]]:
                     J += fix_info[r]
             J = 0.5 * (J + J.T)
-            try:
-                np.linalg.cholesky(J)
-            except np.linalg.LinAlgError:
+            var = position_variances(J, n, s)
+            if var is None:
                 failed_at[b] = k
                 break
-            C = np.linalg.inv(J)
-            for i in range(n):
-                pos_var[k, b, i] = np.trace(C[s * i:s * i + 3, s * i:s * i + 3])
+            pos_var[k, b] = var
     pos_var[:] = pos_var[:, first[which]]
     failed_at[:] = failed_at[first[which]]
     return Pcrlb(pos_var=pos_var, failed_at=failed_at)

@@ -171,18 +171,31 @@ def pcrlb_reference(inputs: BoundInputs) -> Pcrlb:
             onset = np.where((fv[k] > 0) & ((fv[k - 1] != fv[k]) if k > 0 else True), fv[k], 0.0)
             F, Q = joint_model(n, w.dt, w.imu_sigma, has_bias, has_fault, fv[k] > 0, onset)
             # C⁻ = Q + F J_{k−1}⁻¹ Fᵀ;  J_k = (C⁻)⁻¹ + Σ_c E[H_cᵀ R_c⁻¹ H_c]  (literal inverses: this is the reference)
-            C_prior = Q + F @ np.linalg.inv(J) @ F.T
-            C_prior = 0.5 * (C_prior + C_prior.T)
+            C_prior = predicted_covariance(J, F, Q)
             J = np.linalg.inv(C_prior) + measurement_information(
                 w.pos[k, b], w.use[k, b], w.kind, w.target, w.r0, w.anchors, w.landmarks,
                 C_prior[np.ix_(pos_idx, pos_idx)], s)
             J = 0.5 * (J + J.T)
-            try:
-                np.linalg.cholesky(J)
-            except np.linalg.LinAlgError:
+            var = position_variances(J, n, s)
+            if var is None:
                 failed_at[b] = k
                 break
-            C = np.linalg.inv(J)
-            for i in range(n):
-                pos_var[k, b, i] = np.trace(C[s * i:s * i + 3, s * i:s * i + 3])
+            pos_var[k, b] = var
     return Pcrlb(pos_var=pos_var, failed_at=failed_at)
+
+
+def predicted_covariance(J: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """C⁻ = Q + F J⁻¹ Fᵀ, symmetrized (one prediction of the recursion)."""
+    C = Q + F @ np.linalg.inv(J) @ F.T
+    return 0.5 * (C + C.T)
+
+
+def position_variances(J: np.ndarray, n: int, s: int) -> np.ndarray | None:
+    """tr[J⁻¹] over each of the N UAVs' position blocks (s states per UAV, UAV-major, first in the state) of a
+    symmetric J; None where J is not positive definite."""
+    try:
+        np.linalg.cholesky(J)
+    except np.linalg.LinAlgError:
+        return None
+    C = np.linalg.inv(J)
+    return np.array([np.trace(C[s * i:s * i + 3, s * i:s * i + 3]) for i in range(n)])

@@ -202,11 +202,7 @@ def board_tables(board: SuiteBoard, family: str | None = None,
               f"gain (to the information bound) closed, mean over tasks where it is defined. Tasks: "
               f"covered/total. {what.capitalize()} columns: × uniform over the {what}'s tasks (* some not "
               f"covered).")
-    if board.filled:
-        ref = board.reference
-        legend += (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"
-                   f" (#{ref.id if ref else '?'}): their results files predate it.")
-    out.append(Text(legend, style=LEGEND_STYLE))
+    out.append(Text(legend + _filled_note(board), style=LEGEND_STYLE))
     return out
 
 
@@ -258,12 +254,17 @@ def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: st
               "each UAV localizing alone (non-cooperative), with its CI. Gap: share of the achievable gain (to the "
               "information bound) closed. Tasks: covered/total on the track. Other columns: × uniform over the "
               "family's or task's tasks (* some not covered).")
-    if board.filled:
-        ref = board.reference
-        legend += (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"
-                   f" (#{ref.id if ref else '?'}): their results files predate it.")
-    out.append(Text(legend, style=LEGEND_STYLE))
+    out.append(Text(legend + _filled_note(board), style=LEGEND_STYLE))
     return out
+
+
+def _filled_note(board) -> str:
+    """The legend's note on episodes whose uniform RMSE came from the stored uniform entry ('' if none)."""
+    if not board.filled:
+        return ""
+    ref = board.reference
+    return (f" uniform_rmse of {board.filled} episode(s) taken from the stored uniform entry"
+            f" (#{ref.id if ref else '?'}): their results files predate it.")
 
 
 def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family: str | None = None,
