@@ -44,12 +44,19 @@ EVAL_TASKS_V1: dict[str, str] = {
     "swarmloc/HybridNoiseRandom-v1": "rmse",
 }
 
+#: the same for a run on v2 tasks (the admitted v2 families' randomized tasks, scored UAVs)
+EVAL_TASKS_V2: dict[str, str] = {
+    "swarmloc/ScaleRandom-v2": "rmse",
+    "swarmloc/GradualFaultRandom-v2": "rmse",
+    "swarmloc/AnchorNLOSRandom-v2": "rmse",
+}
+
 
 def eval_tasks(training_tasks) -> dict[str, str]:
-    """The dev-evaluation tasks of a run: v1's when every training task is a v1 task, else v0's."""
+    """The dev-evaluation tasks of a run: those of the oldest benchmark version among its training tasks."""
     from swarmloc.envs.tasks.catalogue import get_spec
 
-    return EVAL_TASKS_V1 if all(get_spec(t).version >= 1 for t in training_tasks) else EVAL_TASKS
+    return {0: EVAL_TASKS, 1: EVAL_TASKS_V1, 2: EVAL_TASKS_V2}[min(get_spec(t).version for t in training_tasks)]
 
 
 @dataclass
