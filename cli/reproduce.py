@@ -298,7 +298,7 @@ class Shipped:
     methods: tuple[str, ...] = ()
     """Methods to re-evaluate (default: every method with a shipped file of the suite)."""
     suite: str = "standard-v1"
-    """standard-v1 or standard-v0."""
+    """standard-v1, standard-v2 or standard-v0."""
     workers: int = 2
     """Worker processes."""
     bounds_only: bool = False

@@ -1,7 +1,8 @@
 """The shipped reference results: one results file per shipped method and suite.
 
 ``bench/results/standard-v1/<method>.json`` are the results of the shipped methods on
-``standard-v1``, the default board; ``bench/results/standard-v0/<method>.json`` those of the
+``standard-v1``, the default board; ``bench/results/standard-v2/<method>.json`` those on
+benchmark v2's ``standard-v2``; ``bench/results/standard-v0/<method>.json`` those of the
 frozen ``standard-v0``. Each is what ``swarmloc evaluate --method <method> --suite <suite>``
 writes; ``swarmloc reproduce shipped`` regenerates them. They travel in the wheel as package
 data. The leaderboard stores them (``swarmloc.leaderboard.store.shipped``); the calibration
@@ -17,7 +18,7 @@ from pathlib import Path
 DEFAULT_SUITE = "standard-v1"
 #: the shipped results of each suite, default board first
 RESULTS_DIRS: dict[str, Path] = {
-    suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v0")
+    suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v2", "standard-v0")
 }
 
 
