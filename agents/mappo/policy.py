@@ -304,10 +304,13 @@ def weights_metadata(weights: str | Path) -> dict:
 
 
 #: the shipped weights of each benchmark version, trained on that version's tasks (v0: the
-#: v0 UWB ranging tasks, frozen with v0; v1: the v1 randomized families' training seeds)
+#: v0 UWB ranging tasks, frozen with v0; v1: the v1 randomized families' training seeds); a version
+#: without an entry runs the newest older one (``mappo-set-gru`` was first trained on v1 and runs
+#: those weights on v0 tasks too)
 SHIPPED: dict[str, dict[int, str]] = {
     "mappo": {0: "mappo.pt", 1: "mappo_v1.pt"},
     "mappo-accuracy-only": {0: "mappo_accuracy_only.pt", 1: "mappo_accuracy_only_v1.pt"},
+    "mappo-set-gru": {0: "mappo_set_gru.pt"},
 }
 
 

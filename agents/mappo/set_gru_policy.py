@@ -45,11 +45,11 @@ from swarmloc.agents.mappo.policy import (
     kinds_mask,
     limit_logit,
     read_state_dict,
+    shipped_weights,
     trust_output_layer,
     weights_kinds,
 )
 from swarmloc.agents.protocols import TrustInput
-from swarmloc.agents.registry import WEIGHTS_DIR
 
 
 def _masked_pool(x: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -199,7 +199,8 @@ class SetGruPolicy:
                 f"kinds={self.kinds.astype(int).tolist()}, flops_per_channel={self.flops_per_channel:.0f})")
 
 
-def mappo_set_gru(weights: str | Path | None = None) -> SetGruPolicy:
-    """``mappo-set-gru``: shipped weights, the deterministic set + GRU actor, unsmoothed (module docstring)."""
-    path = Path(weights) if weights is not None else WEIGHTS_DIR / "mappo_set_gru.pt"
+def mappo_set_gru(weights: str | Path | None = None, version: int | None = None) -> SetGruPolicy:
+    """``mappo-set-gru``: the shipped weights of the benchmark version (``policy.SHIPPED``), the deterministic
+    set + GRU actor, unsmoothed (module docstring)."""
+    path = Path(weights) if weights is not None else shipped_weights("mappo-set-gru", version)
     return SetGruPolicy(load_set_gru_actor(path), kinds=weights_kinds(path))
