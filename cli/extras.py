@@ -23,7 +23,8 @@ EXTRA_MODULES: dict[str, frozenset[str]] = {
     "train": frozenset({"torch", "tensordict", "torchrl", "tensorboard"}),
     "explain": frozenset({"torch", "tensordict", "torchrl", "captum"}),
     "factorgraph": frozenset({"gtsam"}),
-    "all": frozenset({"torch", "tensordict", "torchrl", "tensorboard", "sqlalchemy", "captum", "gtsam"}),
+    "tune": frozenset({"optuna"}),
+    "all": frozenset({"torch", "tensordict", "torchrl", "tensorboard", "sqlalchemy", "captum", "gtsam", "optuna"}),
 }
 
 #: the extra of a command (by its first word) that covers everything it imports in the common case
