@@ -144,6 +144,8 @@ class LoadedMethod:
         entry_point: the text it was loaded from.
         track, privileged, deterministic: see :class:`MethodEntry`.
         method: the instance (a ``LinkTrustPolicy`` or an ``Estimator``).
+        privileged_training: see :class:`MethodEntry`; a user method declares it as an attribute
+            ``privileged_training`` (default False).
     """
 
     name: str
@@ -152,6 +154,7 @@ class LoadedMethod:
     privileged: bool
     deterministic: bool
     method: Any
+    privileged_training: bool = False
 
 
 def method_names(include_privileged: bool = True) -> list[str]:
@@ -279,9 +282,13 @@ def load_method(text: str, weights: str | Path | None = None, version: int | Non
         module_name, attr = entry.factory.split(":")
         method = _call_factory(_resolve(module_name, attr, text), weights, text, version)
         name = entry.name
+        privileged_training = entry.privileged_training
     else:
         method = _call_factory(_resolve(match["module"], match["attr"], text), weights, text, version)
         name = match["attr"].rsplit(".", 1)[-1]
+        privileged_training = getattr(method, "privileged_training", False)
+        if not isinstance(privileged_training, bool):
+            raise TypeError(f"{text!r}: privileged_training must be True or False, got {privileged_training!r}")
     track = track_of(method, text)
     if smooth:
         if track != "A":
@@ -289,4 +296,5 @@ def load_method(text: str, weights: str | Path | None = None, version: int | Non
         method = MarkovSmoothing(method)
         name = f"{name}{SMOOTH_SUFFIX}"
     return LoadedMethod(name=name, entry_point=text, track=track, privileged=is_privileged(method),
-                        deterministic=is_deterministic(method), method=method)
+                        deterministic=is_deterministic(method), method=method,
+                        privileged_training=privileged_training)

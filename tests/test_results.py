@@ -57,7 +57,7 @@ def test_results_file_round_trips(tmp_path: Path) -> None:
 
 def test_older_schema_reads_its_missing_metrics_as_null() -> None:
     raw = json.loads(R.dumps_results(_results()))
-    assert raw["schema_version"] == R.SCHEMA_VERSION == 5
+    assert raw["schema_version"] == R.SCHEMA_VERSION == 6
     raw["schema_version"] = 2
     for name in ("recovery_s", "recovered"):
         for episode in raw["episodes"]:
@@ -133,7 +133,7 @@ def test_truncated_file_is_rejected_clearly(tmp_path: Path, keep: float) -> None
         (b"\xff\xfe garbage", "not UTF-8"),
         (b'{"schema_version": 1,, }', r"corrupted \(invalid JSON\): .* \(line 1, column 22\)"),
         (b"[1, 2]", "must hold a JSON object, got list"),
-        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3, 4, 5 \\(the file was written by a newer swarmloc: upgrade"),
+        (b'{"schema_version": 7}', "schema_version 7; this swarmloc reads schema versions 1, 2, 3, 4, 5, 6 \\(the file was written by a newer swarmloc: upgrade"),
     ],
 )
 def test_corrupted_file_is_rejected_clearly(tmp_path: Path, content: bytes, expected: str) -> None:
@@ -233,3 +233,35 @@ def test_score_block_summarizes_the_episodes() -> None:
     assert block.S == S.suite_score([e.model_dump() for e in results.episodes]).S
     again = R.parse_results(R.dumps_results(results))
     assert again.score == block
+
+
+def test_how_the_method_was_made_is_in_the_method_block(tmp_path: Path) -> None:
+    """Schema 6: privileged_training from the registry, the run from the weights' training record, the FLOPs the
+    method declares; an older file reads them as null (not declared), a schema-6 file must state privileged_training."""
+    from swarmloc.agents.registry import load_method
+    from swarmloc.bench.evaluation.outcomes import method_info, training_run
+
+    info = method_info(load_method("chi2-soft"))
+    assert (info.privileged_training, info.run, info.flops_per_channel) == (False, None, 5.0)
+    assert method_info(load_method("supervised-trust")).privileged_training is True
+    weights = tmp_path / "w.seed3.pt"
+    weights.write_bytes(b"weights")
+    assert training_run(weights) is None  # no record beside it
+    weights.with_suffix(".json").write_text(json.dumps({"config": {"seed": 3}}))
+    assert training_run(weights) == 3
+    weights.with_suffix(".json").write_text(json.dumps({"config": {"seed": "3"}}))
+    with pytest.raises(ValueError, match="config.seed must be a non-negative integer .* got '3'"):
+        training_run(weights)
+    raw = json.loads(R.dumps_results(_results()))
+    assert raw["method"]["privileged_training"] is False and raw["method"]["run"] is None
+    raw["schema_version"] = 5
+    for key in ("privileged_training", "run", "flops_per_channel"):
+        del raw["method"][key]
+    assert R.parse_results(json.dumps(raw)).method.privileged_training is None
+    raw["schema_version"] = 6
+    raw["method"]["privileged_training"] = None
+    with pytest.raises(R.ResultsFileError, match="privileged_training must be true or false"):
+        R.parse_results(json.dumps(raw))
+    raw["method"] |= {"privileged_training": True, "run": True}
+    with pytest.raises(R.ResultsFileError, match="method.run"):
+        R.parse_results(json.dumps(raw))

@@ -9,6 +9,7 @@ assembles the results file) — and say which tasks failed (:class:`EvaluationFa
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -104,13 +105,47 @@ class EvaluationFailed(RuntimeError):
         super().__init__("\n".join(lines))
 
 
+def training_run(weights: str | os.PathLike[str]) -> int | None:
+    """The training run a weights file comes from: ``config.seed`` of its training record, the JSON beside it.
+
+    Every ``swarmloc train`` command writes the record as the weights path with ``.json``
+    (``mappo_set_gru_v2.seed2.pt`` → ``mappo_set_gru_v2.seed2.json``); the runs of the learned methods
+    differ in that seed alone. Weights without a record, or a record without ``config.seed``, have no run.
+
+    Raises:
+        ValueError: the record is not a JSON object, or its ``config.seed`` is not a non-negative integer.
+    """
+    record = Path(weights).with_suffix(".json")
+    if not record.is_file():
+        return None
+    try:
+        raw = json.loads(record.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"training record {record} of weights {weights} is not JSON: {err}") from None
+    if not isinstance(raw, dict):
+        raise ValueError(f"training record {record} must hold a JSON object, got {type(raw).__name__}")
+    config = raw.get("config")
+    seed = config.get("seed") if isinstance(config, dict) else None
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"training record {record}: config.seed must be a non-negative integer (the run seed), "
+                         f"got {seed!r}")
+    return seed
+
+
 def method_info(loaded: LoadedMethod, weights: str | None = None) -> MethodInfo:
-    """The results-file description of a loaded method."""
-    digest = None
+    """The results-file description of a loaded method: what it is, how it was made (``privileged_training``,
+    the training ``run`` of its weights file) and what it declares it costs (``flops_per_channel``)."""
+    digest = run = None
     if weights is not None:
         digest = hashlib.sha256(Path(weights).read_bytes()).hexdigest()
+        run = training_run(weights)
+    flops = getattr(loaded.method, "flops_per_channel", None)
     return MethodInfo(name=loaded.name, entry_point=loaded.entry_point, weights_sha256=digest,
-                      privileged=loaded.privileged, track=loaded.track, deterministic=loaded.deterministic)
+                      privileged=loaded.privileged, track=loaded.track, deterministic=loaded.deterministic,
+                      privileged_training=loaded.privileged_training, run=run,
+                      flops_per_channel=None if flops is None else float(flops))
 
 
 def suite_info(suite: Suite) -> SuiteInfo:
@@ -183,4 +218,4 @@ def write_run(out: str | os.PathLike[str], results: Results, traces: list[Trace]
 
 
 __all__ = ["EvaluationFailed", "Gathered", "MethodRun", "TaskOutcome", "method_info", "partial_path", "suite_info",
-           "write_run"]
+           "training_run", "write_run"]

@@ -3,8 +3,9 @@
 One JSON document per (method, suite) evaluation, with exactly this top-level shape::
 
     {
-      "schema_version": 5,
-      "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic"},
+      "schema_version": 6,
+      "method":     {"name", "entry_point", "weights_sha256", "privileged", "track", "deterministic",
+                     "privileged_training", "run", "flops_per_channel"},
       "suite":      {"name", "version", "sha256"},
       "provenance": {"package_version", "git_commit", "created_utc",
                      "python_version", "numpy_version", "torch_version",
@@ -49,7 +50,7 @@ from pydantic import (
 from swarmloc.bench.common.files import write_bytes_atomic
 from swarmloc.bench.common.provenance import MachineInfo, Provenance, collect_provenance  # noqa: F401  (re-exported)
 
-SCHEMA_VERSION: Literal[5] = 5
+SCHEMA_VERSION: Literal[6] = 6
 """Version of the results-file schema written by this module; bump on any change.
 
 Version history: 1 — the first metrics, ``normalized_score`` among them; 2 — adds
@@ -57,11 +58,13 @@ Version history: 1 — the first metrics, ``normalized_score`` among them; 2 —
 ``bound_rmse`` (the episode's information bound); 3 — adds ``recovery_s`` and ``recovered``
 (the faulty UAVs' recovery after an IMU fault); 4 — drops ``normalized_score`` (the retired
 score against the oracle of the old fault labels); 5 — the ``score`` block adds ``tracks``, a
-benchmark v2 suite's score per track (null for other suites and in older files).
+benchmark v2 suite's score per track (null for other suites and in older files); 6 — the ``method`` block
+adds ``privileged_training``, ``run`` and ``flops_per_channel`` (how the method was made and what it costs;
+an older file reads them as null: not declared).
 """
 #: schema versions this module reads (an older file reads with the metrics it lacks null,
 #: and without the retired ones)
-READABLE_SCHEMA_VERSIONS = (1, 2, 3, 4, 5)
+READABLE_SCHEMA_VERSIONS = (1, 2, 3, 4, 5, 6)
 
 METRIC_NAMES: tuple[str, ...] = (
     "rmse",
@@ -93,6 +96,7 @@ SCHEMA_METRICS: dict[int, tuple[str, ...]] = {
     3: METRIC_NAMES,
     4: METRIC_NAMES,
     5: METRIC_NAMES,
+    6: METRIC_NAMES,
 }
 """The current metrics a results file of each schema version holds (the others read as null)."""
 
@@ -127,6 +131,15 @@ class MethodInfo(BaseModel):
         privileged: True when the method reads privileged information (truth, fault labels).
         track: ``"A"`` (link trust inside the env's CEKF) or ``"B"`` (full estimator).
         deterministic: True when re-running an episode reproduces its metrics bit for bit.
+        privileged_training: True when the method's weights were fitted to privileged labels (fault
+            or error labels, read while training only); it runs without them (``privileged`` False).
+            False unless declared; null in files older than schema 6 (not declared then).
+        run: the training run these weights come from (the run seed, ``config.seed`` of the
+            weights' training record); null for a method without one, or weights without a record.
+            The leaderboard shows the runs of one method as one standing (docs/leaderboard.md).
+        flops_per_channel: FLOPs the method declares per present channel per step (Track A;
+            ``swarmloc.agents.protocols``); null where it declares none (Track B reports FLOPs per
+            UAV-step in its output instead, which ``delay_ms`` counts).
     """
 
     model_config = _FROZEN
@@ -137,6 +150,9 @@ class MethodInfo(BaseModel):
     privileged: bool
     track: Literal["A", "B"]
     deterministic: bool
+    privileged_training: bool | None = False
+    run: Annotated[int, Field(strict=True, ge=0)] | None = None
+    flops_per_channel: MetricValue = Field(default=None, ge=0.0, allow_inf_nan=False)
 
 
 class SuiteInfo(BaseModel):
@@ -307,7 +323,7 @@ class Results(BaseModel):
 
     model_config = _FROZEN
 
-    schema_version: Literal[1, 2, 3, 4, 5] = SCHEMA_VERSION
+    schema_version: Literal[1, 2, 3, 4, 5, 6] = SCHEMA_VERSION
     method: MethodInfo
     suite: SuiteInfo
     provenance: Provenance
@@ -319,10 +335,13 @@ class Results(BaseModel):
     @classmethod
     def _read_older_versions(cls, raw: Any) -> Any:
         """An older file lacks the later versions' metrics: they read as null (aggregates included);
-        it may hold retired metrics: they are accepted and left out (episodes and aggregates)."""
+        it may hold retired metrics: they are accepted and left out (episodes and aggregates). A file
+        older than schema 6 did not declare ``privileged_training``: it reads as null, not False."""
         version = raw.get("schema_version") if isinstance(raw, dict) else None
         if version not in SCHEMA_METRICS or version == SCHEMA_VERSION:
             return raw
+        if version < 6 and isinstance(raw.get("method"), dict):  # how the method was made: not declared then
+            raw = {**raw, "method": {"privileged_training": None, **raw["method"]}}
         retired = {name for name, dropped in RETIRED_METRICS.items() if version < dropped}
 
         def current(metrics: Any) -> Any:
@@ -340,7 +359,11 @@ class Results(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> Results:
-        """Episodes are unique and the aggregates cover exactly the evaluated tasks."""
+        """Episodes are unique, the aggregates cover exactly the evaluated tasks, and a schema 6 file
+        declares ``privileged_training``."""
+        if self.schema_version >= 6 and self.method.privileged_training is None:
+            raise ValueError(f"method.privileged_training must be true or false in a schema "
+                             f"{self.schema_version} file (null only in files older than schema 6)")
         counts = Counter((e.task, e.seed) for e in self.episodes)
         repeated = sorted(k for k, n in counts.items() if n > 1)
         if repeated:
