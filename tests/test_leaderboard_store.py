@@ -291,22 +291,22 @@ def test_two_processes_creating_a_fresh_store_at_once(empty_url: str) -> None:
 
 def test_schema_version_and_migration_path(empty_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
     with LeaderboardStore(empty_url) as store:
-        assert store.schema_version() == store_module.SCHEMA_VERSION == 2
+        assert store.schema_version() == store_module.SCHEMA_VERSION == 3
     applied = []
 
-    def to_v3(conn: Any) -> None:
-        conn.exec_driver_sql("CREATE TABLE probe_v3 (id INTEGER PRIMARY KEY)")
-        applied.append(3)
+    def to_v4(conn: Any) -> None:
+        conn.exec_driver_sql("CREATE TABLE probe_v4 (id INTEGER PRIMARY KEY)")
+        applied.append(4)
 
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 3)
-    monkeypatch.setitem(store_module.MIGRATIONS, 2, to_v3)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 4)
+    monkeypatch.setitem(store_module.MIGRATIONS, 3, to_v4)
     with LeaderboardStore(empty_url) as store:
-        assert store.schema_version() == 3 and applied == [3]
+        assert store.schema_version() == 4 and applied == [4]
     with LeaderboardStore(empty_url):  # already upgraded: nothing re-applied
-        assert applied == [3]
-    assert "probe_v3" in dump(empty_url)
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 2)
-    with pytest.raises(StoreError, match=r"schema version 3; this swarmloc supports up to 2"):
+        assert applied == [4]
+    assert "probe_v4" in dump(empty_url)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 3)
+    with pytest.raises(StoreError, match=r"schema version 4; this swarmloc supports up to 3"):
         LeaderboardStore(empty_url)
 
 
@@ -336,13 +336,40 @@ def test_a_version_1_store_is_rescored(empty_url: str, tmp_path: Path) -> None:
     finally:
         engine.dispose()
     with LeaderboardStore(empty_url) as store:
-        assert store.schema_version() == 2
+        assert store.schema_version() == store_module.SCHEMA_VERSION
         rescored, bare = store.get(ids[0]), store.get(ids[1])
     expected = EntryScore.of(json.loads(path.read_text())["episodes"])
     assert expected is not None and expected.S == pytest.approx(gain, abs=1e-12)
     assert rescored.score == expected and bare.score is None
     assert all("normalized_score" not in per for per in rescored.task_aggregates.values())
     assert rescored.task_aggregates["swarmloc/Ideal-v0"]
+
+
+def test_a_version_2_store_gains_the_method_columns(empty_url: str, tmp_path: Path) -> None:
+    """2 → 3: ``run``, ``privileged_training`` and ``flops_per_channel`` are added and filled from each stored
+    results file's method block (a file that does not say, or a stub, leaves them null)."""
+    from sqlalchemy import text
+
+    def made(raw: dict[str, Any]) -> None:
+        raw["method"] |= {"run": 2, "privileged_training": True, "flops_per_channel": 7.0}
+
+    path = H.make_results_file(tmp_path / "run2.json", "lb_fake_runner:good", edit=made)
+    with LeaderboardStore(empty_url) as store:
+        ids = [store.add(_entry(method_hash="1" * 64, results_json=path.read_text())),
+               store.add(_entry(method_hash="2" * 64))]
+    engine = create_engine(empty_url)
+    try:
+        with engine.begin() as conn:  # what a version-2 store holds: no such columns
+            for column in ("run", "privileged_training", "flops_per_channel"):
+                conn.execute(text(f"ALTER TABLE submissions DROP COLUMN {column}"))
+            conn.execute(text("UPDATE swarmloc_schema_version SET version = 2"))
+    finally:
+        engine.dispose()
+    with LeaderboardStore(empty_url) as store:
+        assert store.schema_version() == 3
+        made_entry, stub = store.get(ids[0]), store.get(ids[1])
+    assert (made_entry.run, made_entry.privileged_training, made_entry.flops_per_channel) == (2, True, 7.0)
+    assert (stub.run, stub.privileged_training, stub.flops_per_channel) == (None, None, None)
 
 
 def test_a_failed_migration_leaves_the_old_schema(empty_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -353,8 +380,8 @@ def test_a_failed_migration_leaves_the_old_schema(empty_url: str, monkeypatch: p
         conn.exec_driver_sql("CREATE TABLE half_done (id INTEGER PRIMARY KEY)")
         raise RuntimeError("migration bug")
 
-    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 3)
-    monkeypatch.setitem(store_module.MIGRATIONS, 2, broken)
+    monkeypatch.setattr(store_module, "SCHEMA_VERSION", 4)
+    monkeypatch.setitem(store_module.MIGRATIONS, 3, broken)
     with pytest.raises(RuntimeError, match="migration bug"):
         LeaderboardStore(empty_url)
     assert dump(empty_url) == before  # DDL rolled back too (both backends have transactional DDL)

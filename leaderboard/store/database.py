@@ -56,12 +56,13 @@ from swarmloc.leaderboard.store.records import (
 ENV_VAR: str = "SWARMLOC_DB"
 """Environment variable naming the store's database URL."""
 
-SCHEMA_VERSION: int = 2
+SCHEMA_VERSION: int = 3
 """Schema version written by this code.
 
 History: 1 — the ``score_*`` columns hold the retired normalized score (mean over all runs);
 2 — they hold the score (``records.EntryScore``: S, its CI, the IQM of the gains), and the
-retired metric has no per-task aggregates.
+retired metric has no per-task aggregates; 3 — ``submissions`` adds ``run``,
+``privileged_training`` and ``flops_per_channel`` (results schema 6's method block).
 """
 
 
@@ -81,7 +82,29 @@ def _rescore(conn: Connection) -> None:
     conn.execute(delete(aggregates).where(aggregates.c.metric == "normalized_score"))
 
 
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _rescore}
+#: the columns schema 3 adds to ``submissions``, each filled from the stored results file's method block
+_METHOD_COLUMNS = ("run", "privileged_training", "flops_per_channel")
+
+
+def _method_columns(conn: Connection) -> None:
+    """2 → 3: add ``run``, ``privileged_training`` and ``flops_per_channel`` to ``submissions`` (those it
+    lacks) and fill them from every stored results file's method block (null where it does not say)."""
+    rows = SubmissionRow.__table__
+    present = {c["name"] for c in inspect(conn).get_columns(rows.name)}
+    for name in _METHOD_COLUMNS:
+        if name not in present:  # portable DDL: the column's type as this dialect spells it
+            kind = rows.c[name].type.compile(dialect=conn.dialect)
+            conn.exec_driver_sql(f"ALTER TABLE {rows.name} ADD COLUMN {name} {kind}")
+    for row_id, text in conn.execute(select(rows.c.id, rows.c.results_json)).all():
+        try:
+            method = json.loads(text)["method"]
+            values = {name: method.get(name) for name in _METHOD_COLUMNS}
+        except (ValueError, KeyError, TypeError, AttributeError):  # not a results file (a test's stub)
+            continue
+        conn.execute(update(rows).where(rows.c.id == row_id).values(**values))
+
+
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _rescore, 2: _method_columns}
 """``from_version -> upgrade(connection)`` bringing a store from ``v`` to ``v + 1``.
 
 Add an entry (and bump :data:`SCHEMA_VERSION`) whenever the tables change; each step
@@ -393,6 +416,9 @@ class LeaderboardStore:
             git_commit=row.git_commit,
             results_json=row.results_json,
             task_aggregates=per_task,
+            run=row.run,
+            privileged_training=row.privileged_training,
+            flops_per_channel=row.flops_per_channel,
         )
 
     def entries(self, suite_name: str | None = None) -> list[LeaderboardEntry]:

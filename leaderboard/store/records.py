@@ -6,7 +6,9 @@ Tables (generic SQLAlchemy types only, so SQLite and PostgreSQL share one schema
 * ``submissions`` — one row per accepted submission, unique on
   (method hash, suite name, suite version), with the submitted results file verbatim and
   its score (``score_mean`` is S, the mean over tasks of the per-task gain; ``score_iqm``
-  the IQM of the episodes' gains; ``score_ci_*`` the 95 % CI of S);
+  the IQM of the episodes' gains; ``score_ci_*`` the 95 % CI of S), and how the method was made
+  (``run``, ``privileged_training``) and what it declares it costs (``flops_per_channel``), from the
+  results file's method block (null where an older file does not declare them);
 * ``task_aggregates`` — mean, IQM and CI per (submission, task, metric).
 """
 
@@ -82,6 +84,9 @@ class SubmissionRow(Base):
     package_version: Mapped[str] = mapped_column(String(64), nullable=False)
     git_commit: Mapped[str | None] = mapped_column(String(64))
     results_json: Mapped[str] = mapped_column(Text, nullable=False)
+    run: Mapped[int | None] = mapped_column(BigInteger)
+    privileged_training: Mapped[bool | None] = mapped_column()
+    flops_per_channel: Mapped[float | None] = mapped_column(Float)
 
     aggregates: Mapped[list[TaskAggregateRow]] = relationship(
         back_populates="submission", cascade="all, delete-orphan", lazy="selectin"
@@ -156,8 +161,12 @@ class LeaderboardEntry:
 
     ``score`` is the score of the submitted episodes (:class:`EntryScore`: S with its IQM of
     the gains and task-stratified 95 % CI); ``delay_ms``, ``energy_j``, ``jitter`` are means
-    over all runs; ``task_aggregates[task][metric]`` holds per-task statistics (undefined
+    over all episodes; ``task_aggregates[task][metric]`` holds per-task statistics (undefined
     metrics absent). ``results_json`` is the submitted results file, byte for byte.
+    ``run``, ``privileged_training`` and ``flops_per_channel`` are the results file's
+    (``swarmloc.bench.evaluation.results.MethodInfo``): the training run of the weights (the board
+    shows the runs of one method as one standing), weights fitted to privileged labels, the FLOPs
+    the method declares per channel; None where the file does not say.
     """
 
     name: str
@@ -187,6 +196,9 @@ class LeaderboardEntry:
     task_aggregates: dict[str, dict[str, Aggregate]] = field(default_factory=dict)
     created_utc: datetime = field(default_factory=lambda: datetime.now(timezone.utc))
     id: int | None = None
+    run: int | None = None
+    privileged_training: bool | None = None
+    flops_per_channel: float | None = None
 
     @property
     def tasks(self) -> list[str]:

@@ -121,6 +121,9 @@ def build_entry(
         git_commit=results.provenance.git_commit,
         results_json=validated.results_text,
         task_aggregates=per_task,
+        run=results.method.run,
+        privileged_training=results.method.privileged_training,
+        flops_per_channel=results.method.flops_per_channel,
     )
 
 
