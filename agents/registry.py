@@ -82,6 +82,11 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
                 "CUSUM per channel on the NIS (λ = 4, ARL₀ = 10⁴), readmits on a reverse CUSUM"),
     MethodEntry("raim", "swarmloc.agents.trust.integrity:raim_policy", "A",
                 "RAIM per UAV: Σ NIS vs χ²₀.₉₉₉, leave-one-out exclusion up to a minority"),
+    MethodEntry("cusum-chi2", "swarmloc.agents.trust.composite:cusum_chi2_policy", "A",
+                "cusum on the absolute channels, chi2-soft on the peer channels (their defaults)"),
+    *(MethodEntry(f"{m}-tuned", f"swarmloc.agents.trust.tuned:{m.replace('-', '_')}_tuned", "A",
+                  f"{m} with the values swarmloc tune chose on dev-v2 (record: weights/tuned/{m}.json)")
+      for m in ("huber", "chi2-gate", "chi2-soft", "cusum", "raim", "cusum-chi2")),
     MethodEntry("non-cooperative", f"{_A}:non_cooperative_policy", "A",
                 "each UAV alone: peer channels skipped, absolute ones trusted (a shortcut probe)"),
     MethodEntry("random", f"{_A}:random_policy", "A", "α ~ U(0, 1), seeded (the floor)"),

@@ -24,6 +24,8 @@ monitoring (``cusum``, ``raim``) are in ``integrity.py`` (docs/methods.md).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 from numba import njit
 from scipy.stats import chi2
@@ -33,6 +35,7 @@ from swarmloc.envs.world.labels import LABEL_SIGMAS, label_thresholds
 from swarmloc.envs.tasks.rng import Stream, uniform
 
 from swarmloc.agents.protocols import PrivilegedInfo, TrustInput
+from swarmloc.agents.trust.search_space import Param
 
 #: trust floor of the CEKF (``FilterSettings.alpha_min`` default): R inflated 100×
 ALPHA_MIN = 0.01
@@ -110,6 +113,8 @@ class HuberTrust(_TrustPolicy):
     """
 
     flops_per_channel = 4.0  # sqrt, compare, divide, select
+    #: what ``swarmloc tune huber`` searches (docs/tuning.md)
+    SEARCH_SPACE: ClassVar[tuple[Param, ...]] = (Param("k", 0.5, 4.0, "log"),)
 
     def __init__(self, k: float = 1.345) -> None:
         super().__init__()
@@ -133,6 +138,9 @@ class Chi2GateTrust(_TrustPolicy):
     """
 
     flops_per_channel = 2.0  # compare, select
+    #: what ``swarmloc tune chi2-gate`` searches (docs/tuning.md)
+    SEARCH_SPACE: ClassVar[tuple[Param, ...]] = (Param("confidence", 0.8, 0.9999, "log-tail"),
+                                                 Param("alpha_reject", 0.01, 0.5, "log"))
 
     def __init__(self, confidence: float = 0.95, alpha_reject: float = ALPHA_MIN) -> None:
         super().__init__()
@@ -166,6 +174,9 @@ class Chi2SoftTrust(Chi2GateTrust):
     """
 
     flops_per_channel = 5.0  # compare, subtract, scale, exp, select
+    #: what ``swarmloc tune chi2-soft`` searches (docs/tuning.md)
+    SEARCH_SPACE: ClassVar[tuple[Param, ...]] = (Param("confidence", 0.8, 0.9999, "log-tail"),
+                                                 Param("softness", 0.25, 8.0, "log"))
 
     def __init__(self, confidence: float = 0.95, softness: float = 1.0) -> None:
         super().__init__(confidence=confidence)

@@ -39,6 +39,7 @@ skips it) for an excluded one; absent channels get 1 (they carry nothing).
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -48,6 +49,7 @@ from swarmloc.envs.tasks.channels import KIND_DIM, PEER, PEER_REL, ChannelLayout
 
 from swarmloc.agents.trust.classical import ALPHA_MIN, _check_probability
 from swarmloc.agents.protocols import TrustInput
+from swarmloc.agents.trust.search_space import Param
 
 #: scalar rows the kept channels of a UAV must carry after an exclusion (a 3-D position fix)
 MIN_ROWS = 3
@@ -179,6 +181,10 @@ class CusumTrust(_FdeTrust):
     """
 
     flops_per_channel = 6.0  # subtract, add, max, compare, select, per-UAV count
+    #: what ``swarmloc tune cusum`` searches (docs/tuning.md)
+    SEARCH_SPACE: ClassVar[tuple[Param, ...]] = (Param("design_ratio", 1.5, 16.0, "log"),
+                                                 Param("arl", 10.0, 1e6, "log"),
+                                                 Param("alpha_reject", 0.01, 0.5, "log"))
 
     def __init__(self, design_ratio: float = 4.0, arl: float = 1e4, alpha_reject: float = ALPHA_MIN) -> None:
         super().__init__(alpha_reject)
@@ -289,6 +295,9 @@ class RaimTrust(_FdeTrust):
     """
 
     flops_per_channel = 8.0  # the sum and test (2) and, in a step that excludes, 3 per round (two rounds declared)
+    #: what ``swarmloc tune raim`` searches (docs/tuning.md)
+    SEARCH_SPACE: ClassVar[tuple[Param, ...]] = (Param("false_alarm", 1e-6, 0.1, "log"),
+                                                 Param("alpha_reject", 0.01, 0.5, "log"))
 
     def __init__(self, false_alarm: float = 1e-3, alpha_reject: float = ALPHA_MIN) -> None:
         super().__init__(alpha_reject)
