@@ -50,6 +50,7 @@ COMMANDS: CommandTable = {
     "explain": "swarmloc.cli.explain",
     "demo": "swarmloc.cli.demo",
     "submit": "swarmloc.cli.submit",
+    "tune": "swarmloc.cli.tune",
     "leaderboard": {
         "show": "swarmloc.cli.leaderboard_show",
         "html": "swarmloc.cli.leaderboard_html",

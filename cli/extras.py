@@ -35,6 +35,7 @@ COMMAND_EXTRA: dict[str, str] = {
     "leaderboard": "leaderboard",
     "demo": "all",  # the learned methods and the leaderboard
     "bench": "bench",
+    "tune": "tune",
 }
 
 
