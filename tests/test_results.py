@@ -237,7 +237,7 @@ def test_score_block_summarizes_the_episodes() -> None:
 
 def test_how_the_method_was_made_is_in_the_method_block(tmp_path: Path) -> None:
     """Schema 6: privileged_training from the registry, the run from the weights' training record, the FLOPs the
-    method declares; an older file reads them as null (not declared), a schema-6 file must state privileged_training."""
+    method declares; an older file reads them as null (not declared)."""
     from swarmloc.agents.registry import load_method
     from swarmloc.bench.evaluation.outcomes import method_info, training_run
 
@@ -259,9 +259,6 @@ def test_how_the_method_was_made_is_in_the_method_block(tmp_path: Path) -> None:
         del raw["method"][key]
     assert R.parse_results(json.dumps(raw)).method.privileged_training is None
     raw["schema_version"] = 6
-    raw["method"]["privileged_training"] = None
-    with pytest.raises(R.ResultsFileError, match="privileged_training must be true or false"):
-        R.parse_results(json.dumps(raw))
     raw["method"] |= {"privileged_training": True, "run": True}
     with pytest.raises(R.ResultsFileError, match="method.run"):
         R.parse_results(json.dumps(raw))

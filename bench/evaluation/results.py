@@ -133,7 +133,8 @@ class MethodInfo(BaseModel):
         deterministic: True when re-running an episode reproduces its metrics bit for bit.
         privileged_training: True when the method's weights were fitted to privileged labels (fault
             or error labels, read while training only); it runs without them (``privileged`` False).
-            False unless declared; null in files older than schema 6 (not declared then).
+            ``swarmloc evaluate`` always states it; null: not declared (files older than schema 6, and
+            files rewritten from them, e.g. by ``refresh_bounds``).
         run: the training run these weights come from (the run seed, ``config.seed`` of the
             weights' training record); null for a method without one, or weights without a record.
             The leaderboard shows the runs of one method as one standing (docs/leaderboard.md).
@@ -359,11 +360,7 @@ class Results(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> Results:
-        """Episodes are unique, the aggregates cover exactly the evaluated tasks, and a schema 6 file
-        declares ``privileged_training``."""
-        if self.schema_version >= 6 and self.method.privileged_training is None:
-            raise ValueError(f"method.privileged_training must be true or false in a schema "
-                             f"{self.schema_version} file (null only in files older than schema 6)")
+        """Episodes are unique and the aggregates cover exactly the evaluated tasks."""
         counts = Counter((e.task, e.seed) for e in self.episodes)
         repeated = sorted(k for k, n in counts.items() if n > 1)
         if repeated:
