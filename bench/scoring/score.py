@@ -360,8 +360,8 @@ def _paired_gains(scores: Sequence[SuiteScore], task: str) -> np.ndarray:
     return np.stack(rows)
 
 
-def _paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
-                      seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def paired_resamples(scores: Sequence[SuiteScore], n_resamples: int,
+                     seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per task the ``(methods, n)`` paired gains, and the ``(methods, n_resamples)`` resampled S.
 
     The scores' own bootstrap (stratified for score v1, hierarchical for v2), paired: each
@@ -386,7 +386,7 @@ def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RES
     """Each method's rank as 1 + the number of others whose S is higher beyond doubt.
 
     "Beyond doubt": the CI of the paired difference ``S_other − S_this`` lies above 0
-    (:func:`_paired_resamples`: the same episodes, one shared draw of seeds, and of families
+    (:func:`paired_resamples`: the same episodes, one shared draw of seeds, and of families
     under score v2). Two methods
     whose difference the seeds cannot resolve share a rank. Ranks are not always
     consecutive: with A ahead of B beyond doubt and C level with both, the ranks are 1, 2, 1.
@@ -402,9 +402,19 @@ def separable_ranks(scores: Sequence[SuiteScore], n_resamples: int = DEFAULT_RES
     """
     if not scores:
         return []
-    _, resampled = _paired_resamples(scores, n_resamples, seed)  # (methods, n_resamples): resampled S
+    _, resampled = paired_resamples(scores, n_resamples, seed)  # (methods, n_resamples): resampled S
+    return ranks_beyond_doubt(resampled, confidence)
+
+
+def ranks_beyond_doubt(resampled: np.ndarray, confidence: float = DEFAULT_CONFIDENCE) -> list[int]:
+    """1 + the number of rows whose lead over each row is beyond doubt (its paired CI lies above 0).
+
+    Args:
+        resampled: ``(methods, R)`` the resampled statistic of each method, on paired draws.
+        confidence: of the CI, in (0, 1).
+    """
     ranks = []
-    for i in range(len(scores)):
+    for i in range(len(resampled)):
         low, _ = percentile_interval(resampled - resampled[i], confidence)  # (methods,): the lower CI end of each lead
         ranks.append(1 + int(np.sum(low > 0.0)))
     return ranks
@@ -448,7 +458,7 @@ def paired_difference(a: SuiteScore, b: SuiteScore, n_resamples: int = DEFAULT_R
     Raises:
         ValueError: the scores cover different tasks or seeds, or carry no seeds.
     """
-    per_task, suite = _paired_resamples([a, b], n_resamples, seed)
+    per_task, suite = paired_resamples([a, b], n_resamples, seed)
     tasks = {}
     for (task, gains), resampled in zip(per_task.items(), resampled_means(list(per_task.values()), n_resamples, seed)):
         low, high = percentile_interval(resampled[1] - resampled[0], confidence)

@@ -44,8 +44,8 @@ def mean(values: ArrayLike) -> float:
     return float(np.mean(_as_1d(values)))
 
 
-def _iqm_along_last(x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """IQM over the last axis: drop ⌊n/4⌋ values from each end, average the rest."""
+def iqm_along_last(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """IQM over the last axis of ``(..., n)`` values: drop ⌊n/4⌋ values from each end, average the rest."""
     n = x.shape[-1]
     cut = n // 4
     ordered = np.sort(x, axis=-1)
@@ -64,14 +64,14 @@ def iqm(values: ArrayLike) -> float:
     Returns:
         The interquartile mean.
     """
-    return float(_iqm_along_last(_as_1d(values)))
+    return float(iqm_along_last(_as_1d(values)))
 
 
 def _apply(statistic: Statistic, samples: NDArray[np.float64]) -> NDArray[np.float64]:
     if statistic == "mean":
         return np.mean(samples, axis=-1)
     if statistic == "iqm":
-        return _iqm_along_last(samples)
+        return iqm_along_last(samples)
     raise ValueError(f"unknown statistic {statistic!r}; allowed: 'mean', 'iqm'")
 
 
@@ -180,6 +180,7 @@ __all__ = [
     "aggregate",
     "bootstrap_ci",
     "iqm",
+    "iqm_along_last",
     "mean",
     "summarize",
 ]
