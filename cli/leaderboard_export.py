@@ -1,4 +1,4 @@
-"""``swarmloc leaderboard export``: the leaderboard as CSV or JSON."""
+"""``swarmloc leaderboard export``: the leaderboard as CSV, JSON or marl-eval's raw-data JSON."""
 
 from __future__ import annotations
 
@@ -15,10 +15,12 @@ if TYPE_CHECKING:
 
 @dataclass
 class Options(StoreOptions):
-    """Export the leaderboard as CSV or JSON."""
+    """Export the leaderboard as CSV, JSON or marl-eval's raw-data JSON."""
 
-    format: Literal["csv", "json"] = "csv"
-    """Output format."""
+    format: Literal["csv", "json", "marl-eval"] = "csv"
+    """Output format: `csv` or `json` (one row per method and board: score, runs with the IQM over runs and its CI,
+    privileged_training, delay and FLOPs), or `marl-eval` (InstaDeep marl-eval's {env: {task: {algorithm: {run:
+    ...}}}} with the per-episode gain and RMSE; see docs/leaderboard.md)."""
     out: Path | None = None
     """Output file (standard output when omitted)."""
 

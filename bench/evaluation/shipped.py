@@ -11,6 +11,8 @@ and label reports compare against them.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -27,6 +29,26 @@ def shipped_results(results_dir: Path | None = None) -> list[Path]:
     if results_dir is not None:
         return sorted(results_dir.glob("*.json"))
     return [path for folder in RESULTS_DIRS.values() for path in sorted(folder.glob("*.json"))]
+
+
+def shipped_weights(sha256: str) -> Path | None:
+    """The shipped weights file (``agents/weights``, records aside) whose SHA-256 is ``sha256``, or None.
+
+    A shipped results file evaluated with ``--weights`` (a learned method's training runs,
+    ``<method>.seed<k>.json``) names its weights by hash only; the leaderboard stores it with this file,
+    as any submission with weights.
+    """
+    from swarmloc.agents.registry import WEIGHTS_DIR  # local: the registry, only when weights are looked up
+
+    files = tuple(sorted((p, p.stat().st_size, p.stat().st_mtime_ns) for p in WEIGHTS_DIR.rglob("*")
+                         if p.is_file() and p.suffix != ".json"))
+    return _weights_by_hash(files).get(sha256)
+
+
+@functools.lru_cache(maxsize=4)
+def _weights_by_hash(files: tuple[tuple[Path, int, int], ...]) -> dict[str, Path]:
+    """SHA-256 → path of the weights files (keyed by path, size and modification time: a changed file is re-read)."""
+    return {hashlib.sha256(path.read_bytes()).hexdigest(): path for path, _, _ in files}
 
 
 def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers: int = 2) -> list[Path]:

@@ -21,7 +21,10 @@ from urllib.parse import quote
 from swarmloc.bench.evaluation.results import METRIC_NAMES
 from swarmloc.bench.scoring.families import group_by_family
 from swarmloc.bench.scoring.score import SuiteScore, score_version
+from swarmloc.leaderboard.site.compute import DELAY_BUDGET_MS, compute_rows, place
 from swarmloc.leaderboard.site.ranking import (
+    PRIVILEGED_TRAINING_MARK,
+    PRIVILEGED_TRAINING_NOTE,
     Column,
     Standing,
     SuiteBoard,
@@ -33,6 +36,8 @@ from swarmloc.leaderboard.site.ranking import (
     fmt_pct,
     fmt_score,
     fmt_times,
+    privileged_training,
+    runs_note,
     status,
     suite_board,
     track_boards,
@@ -116,6 +121,61 @@ def _cooperation_cell(score: SuiteScore | None) -> str:
                      "hierarchical-bootstrap 95% CI")
 
 
+def _made_marks(standing: Standing) -> str:
+    """After a method's name: ‡ when fitted to privileged labels while training, and its runs when several."""
+    marks = ""
+    if privileged_training(standing):
+        marks += f" <span class=\"mark\" title=\"{_e(PRIVILEGED_TRAINING_NOTE)}\">{PRIVILEGED_TRAINING_MARK}</span>"
+    if standing.over_runs is not None:
+        each = ", ".join(f"run {e.run}: 2^S {fmt_times(2.0 ** s)}" for e, s in zip(standing.entries,
+                                                                                standing.over_runs.runs))
+        marks += (f" <span class=\"runs\" title=\"{_e(f'interquartile mean over {standing.n_runs} training runs ({each})')}"
+                  f"\">({standing.n_runs} runs)</span>")
+    return marks
+
+
+def _made_notes(board: SuiteBoard) -> str:
+    """The notes under a board's tables on ‡ and on standings of several runs ('' where it has neither)."""
+    notes = [PRIVILEGED_TRAINING_NOTE] if any(privileged_training(s) for s in board.standings) else []
+    notes += [runs_note(board)] if runs_note(board) else []
+    return "".join(f"<p class=\"meta\">{_e(note)}</p>" for note in notes)
+
+
+def _compute_html(board: SuiteBoard, table_id: str) -> str:
+    """The compute view of a board (:mod:`swarmloc.leaderboard.site.compute`), in the accuracy tables' order."""
+    heads = [("#", "number", "the accuracy tables' rank (p: partial coverage; —: privileged)"),
+             ("Method", "text", "method name"),
+             ("2^S", "number", "× lower error than uniform (the accuracy ranking)"),
+             ("Delay per update [ms]", "number", "compute time per UAV-step, filter + method FLOPs on the processor "
+                                                 "profile (delay_ms), mean over the tasks"),
+             ("Worst task [ms]", "number", "the task of the highest mean delay"),
+             (f"Over {DELAY_BUDGET_MS:g} ms", "number", f"tasks whose mean delay exceeds the {DELAY_BUDGET_MS:g} ms "
+                                                        "budget (the standard reward's T_max, madrl), of those measured"),
+             ("FLOPs per channel", "number", "declared by the method, per present channel and step")]
+    head_html = "".join(f"<th scope=\"col\" data-type=\"{kind}\" title=\"{_e(tip)}\"><button type=\"button\">"
+                        f"{_e(label)}</button></th>" for label, kind, tip in heads)
+    rows = []
+    for i, (standing, cost) in enumerate(compute_rows(board)):
+        entry, score = standing.entry, standing.score
+        worst = cost.worst_task
+        cells = [
+            _num_cell(i, place(board, standing)),  # sorts back to the accuracy order
+            f"<td data-value=\"{_e(entry.name.casefold())}\"><a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a>"
+            f"{_made_marks(standing)}</td>",
+            _num_cell(score.times if score else None, fmt_times(score.times if score else None)),
+            _num_cell(cost.delay_ms, "not measured" if cost.delay_ms is None else fmt(cost.delay_ms, 2)),
+            _num_cell(None if worst is None else worst[1], "—" if worst is None else fmt(worst[1], 2),
+                      None if worst is None else worst[0]),
+            _num_cell(cost.over_budget if cost.measured else None,
+                      "—" if not cost.measured else f"{cost.over_budget}/{cost.measured}"),
+            _num_cell(cost.flops_per_channel,
+                      "—" if cost.flops_per_channel is None else f"{cost.flops_per_channel:,.0f}"),
+        ]
+        rows.append(f"<tr data-method-id=\"{entry.id}\">{''.join(cells)}</tr>")
+    return (f"<table class=\"sortable\" id=\"{_e(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n<tbody>\n"
+            + "\n".join(rows) + "\n</tbody>\n</table>")
+
+
 def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Sequence[Column], ranked: bool,
                 table_id: str, cooperation: bool = False) -> str:
     n = len(board.tasks)
@@ -159,7 +219,7 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
         low_high = score.times_ci if score else None
         cells += [
             f"<td data-value=\"{_e(entry.name.casefold())}\">"
-            f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a></td>",
+            f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a>{_made_marks(standing)}</td>",
             f"<td data-value=\"{_e(entry.track)}\">{_e(entry.track)}</td>",
             _num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
                       _score_tip(board, standing)),
@@ -225,6 +285,12 @@ def _board_tables(board: SuiteBoard, columns: Sequence[Column], slug: str, what:
         )
         parts.append(_html_table(board, board.privileged, columns, ranked=False,
                                  table_id=f"privileged-{slug}", cooperation=cooperation))
+    parts.append(_made_notes(board))
+    if board.standings:
+        parts.append(f"<{heading}>Compute</{heading}><p class=\"meta\">Beside the accuracy ranking, in its order: "
+                     f"each method's delay per update against the {DELAY_BUDGET_MS:g} ms budget and the FLOPs it "
+                     "declares per channel. Not measured: the method reports no FLOPs.</p>")
+        parts.append(_compute_html(board, f"compute-{slug}"))
     return parts
 
 
@@ -317,6 +383,27 @@ def _score_text(score: SuiteScore | None, n_tasks: int) -> str:
         f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")
 
 
+def _training_text(standing: Standing) -> str:
+    """How the method was made, for its page (HTML)."""
+    declared = {e.privileged_training for e in standing.entries}
+    if declared == {True}:
+        return _e(f"{PRIVILEGED_TRAINING_MARK} fitted to privileged labels while training (fault or error labels); "
+                  "it runs without them")
+    return "not declared (results file older than schema 6)" if None in declared else "no privileged labels"
+
+
+def _runs_html(standing: Standing) -> str:
+    """A standing of several runs: the IQM over runs and each run's S, with its results file (HTML)."""
+    total = standing.over_runs
+    assert total is not None
+    each = ", ".join(f"run {_e(e.run)}: 2^S {fmt_times(2.0 ** s)} (<a href=\"../results/{e.id}.json\" download>"
+                     f"results</a>)" for e, s in zip(standing.entries, total.runs))
+    return (f"{total.n_runs} training runs, shown as one: 2^S of the interquartile mean over runs "
+            f"{fmt_times(2.0 ** total.S)} [{fmt_times(2.0 ** total.ci_low)}, {fmt_times(2.0 ** total.ci_high)}] "
+            f"(95% CI over runs, families and seeds). {each}. This page shows run {_e(standing.entry.run)}, the run "
+            "nearest the IQM; its per-task table is that run's.")
+
+
 def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
                  explanation: str = "", tracks: Sequence[tuple[str, Standing, int]] = ()) -> str:
     """A method's page; ``tracks``: on a v2 suite, (track, its standing on the track's board, the track's task
@@ -335,6 +422,8 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
         ("URL", url_html),
         ("Track", _e({"A": "A — link trust", "B": "B — full estimator"}.get(entry.track, entry.track))),
         ("Privileged", "yes" if entry.privileged else "no"),
+        ("Training", _training_text(standing)),
+        *([("Runs", _runs_html(standing))] if standing.over_runs is not None else []),
         ("Deterministic", "yes" if entry.deterministic else "no"),
         ("Status", _e(status(entry))),
         ("Entry point", f"<code>{_e(entry.entry_point)}</code>"),
@@ -503,8 +592,9 @@ def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, expl
                   tracks: Sequence[tuple[str, Standing, int]] = ()) -> None:
     """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
     entry = standing.entry
+    for run in standing.entries:  # every run's results file, for download
+        (out / "results" / f"{run.id}.json").write_text(run.results_json, encoding="utf-8")
     results_file = out / "results" / f"{entry.id}.json"
-    results_file.write_text(entry.results_json, encoding="utf-8")
     plots_dir = out / "plots" / str(entry.id)
     if plots_dir.exists():
         shutil.rmtree(plots_dir)

@@ -35,6 +35,14 @@ separable ranks come from the hierarchical bootstrap. Its cooperation gain needs
 the uniform fallback is, from the suite's ``non-cooperative`` entry (same preference), and is
 None on a board without one.
 
+**Runs.** The training runs of one method (entries that declare a ``run``, same name, entry point,
+track and coverage: :mod:`swarmloc.leaderboard.site.runs`) are one standing, and an entry that
+repeats one of them (same weights, or same episodes) is left out. Its score is the interquartile
+mean over runs of the runs' S with a 95 % CI over runs, families and seeds
+(:mod:`swarmloc.bench.scoring.runs`); it ranks by it, and its separable rank compares that IQM
+on paired draws. Its per-task columns, gap closed and cooperation gain are those of the run-mean
+(each episode's gain averaged over runs). A method with one run shows as before.
+
 **Tracks.** A v2 suite's tasks fall into tracks (``spec.track``: cooperative, robust-ranging;
 :mod:`swarmloc.bench.scoring.tracks`) whose scores never mix: :func:`track_boards` scores and
 ranks each track's tasks as a board of their own, which the site draws a part of the front page
@@ -45,15 +53,17 @@ from __future__ import annotations
 
 import json
 from collections.abc import Collection, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE
 from swarmloc.bench.scoring.families import group_by_family, short_task, task_label
-from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, score_version, separable_ranks, suite_score
+from swarmloc.bench.scoring.runs import OverRuns, over_runs, run_mean_episodes, separable_ranks_over_runs
+from swarmloc.bench.scoring.score import SuiteScore, rmse_by_episode, score_version, suite_score
 from swarmloc.bench.scoring.tracks import TRACKS, TrackOf, registered_track, tasks_by_track
+from swarmloc.leaderboard.site.runs import Run, group_runs, representative, without_repeats
 from swarmloc.leaderboard.store.database import LeaderboardEntry
 
 SuiteKey = tuple[str, str]
@@ -77,6 +87,10 @@ class Standing:
         filled: episodes whose ``uniform_rmse`` came from the suite's ``uniform`` entry.
         separable_rank: in the ranked table, 1 + the ranked methods ahead of it beyond doubt
             (see the module docstring); None elsewhere.
+        runs: the training runs it stands for when it stands for several (see "Runs" in the module
+            docstring; ``entry`` is the one nearest their IQM), else empty.
+        over_runs: the IQM over those runs with its CI, and each run's S (None for an entry alone);
+            ``score`` then carries it as S and CI, and the run-mean of everything else.
     """
 
     entry: LeaderboardEntry
@@ -84,6 +98,18 @@ class Standing:
     rank: int | None
     filled: int
     separable_rank: int | None = None
+    runs: tuple[Run, ...] = ()
+    over_runs: OverRuns | None = None
+
+    @property
+    def n_runs(self) -> int:
+        """The training runs this standing stands for (1 for an entry alone)."""
+        return max(1, len(self.runs))
+
+    @property
+    def entries(self) -> tuple[LeaderboardEntry, ...]:
+        """Its stored entries: the runs' (representative among them), or the entry alone."""
+        return tuple(run.entry for run in self.runs) or (self.entry,)
 
     @property
     def full(self) -> bool:
@@ -201,19 +227,38 @@ def suite_board(name: str, version: str, entries: Sequence[LeaderboardEntry],
         uniform = rmse_by_episode(episodes[id(reference)])
     alone = reference_entry(entries, NON_COOPERATIVE_ENTRY_POINT)
     non_cooperative = None if alone is None else rmse_by_episode(episodes[id(alone)])
-    standings = []
+    runs, filled_episodes = [], {}
     for entry in entries:
-        filled_episodes, filled = fill_uniform_rmse(episodes[id(entry)], uniform)
-        score = suite_score(filled_episodes, tasks, suite=name, non_cooperative=non_cooperative)
-        standings.append(Standing(entry, score, None, filled))
+        filled_episodes[id(entry)], filled = fill_uniform_rmse(episodes[id(entry)], uniform)
+        score = suite_score(filled_episodes[id(entry)], tasks, suite=name, non_cooperative=non_cooperative)
+        runs.append(Run(entry, score, filled))
+    standings = [_standing(group, filled_episodes, tasks, name, non_cooperative)
+                 for group in group_runs(without_repeats(runs, episodes))]
     standings.sort(key=_order_key)
     public = [s for s in standings if not s.entry.privileged]
     full = [s for s in public if s.full]
-    separable = separable_ranks([s.score for s in full if s.score is not None])
-    ranked = [Standing(s.entry, s.score, i, s.filled, r) for i, (s, r) in enumerate(zip(full, separable), 1)]
-    partial = [Standing(s.entry, s.score, i, s.filled) for i, s in enumerate((s for s in public if not s.full), 1)]
+    separable = separable_ranks_over_runs([[r.score for r in s.runs] or [s.score] for s in full])
+    ranked = [replace(s, rank=i, separable_rank=r) for i, (s, r) in enumerate(zip(full, separable), 1)]
+    partial = [replace(s, rank=i) for i, s in enumerate((s for s in public if not s.full), 1)]
     return SuiteBoard(name, version, tasks, tuple(ranked), tuple(partial),
                       tuple(s for s in standings if s.entry.privileged), reference)
+
+
+def _standing(group: Sequence[Run], episodes: Mapping[int, list[dict[str, Any]]], tasks: Sequence[str], suite: str,
+              non_cooperative: Mapping[tuple[str, int], float | None] | None) -> Standing:
+    """One entry's standing, or that of a method's runs: scored by the IQM over runs with its CI over runs, the rest
+    (tasks, gap closed, cooperation gain) of the run-mean episodes (:mod:`swarmloc.bench.scoring.runs`)."""
+    if len(group) == 1:
+        (run,) = group
+        return Standing(run.entry, run.score, None, run.filled)
+    scores = [r.score for r in group if r.score is not None]  # grouped runs all have one
+    total = over_runs(scores)
+    mean = suite_score(run_mean_episodes([episodes[id(r.entry)] for r in group]), tasks, suite=suite,
+                       non_cooperative=non_cooperative)
+    assert mean is not None  # the runs cover the same tasks, so their mean does
+    score = replace(mean, S=total.S, ci_low=total.ci_low, ci_high=total.ci_high)
+    return Standing(representative(group, total.S).entry, score, None, sum(r.filled for r in group),
+                    runs=tuple(group), over_runs=total)
 
 
 #: the current benchmark's suite: its board comes first, the shipped results and the demo default to it
@@ -335,6 +380,34 @@ def column_score(score: SuiteScore | None, column: Column) -> ColumnScore | None
 
 # -- formatting ------------------------------------------------------------------------
 
+#: the mark of a method whose weights were fitted to privileged labels while training
+PRIVILEGED_TRAINING_MARK = "‡"
+#: what the mark means, for legends
+PRIVILEGED_TRAINING_NOTE = (f"{PRIVILEGED_TRAINING_MARK} fitted to privileged labels while training: its weights "
+                            "learned from fault or error labels, which it does not read when it runs (ranked).")
+
+
+def privileged_training(standing: Standing) -> bool:
+    """True when the standing's weights were fitted to privileged labels (every run declares it)."""
+    return all(e.privileged_training for e in standing.entries)
+
+
+def method_label(standing: Standing) -> str:
+    """The method's name as the tables show it: ``‡`` when fitted to privileged labels, ``(3 runs)`` for several runs."""
+    mark = f" {PRIVILEGED_TRAINING_MARK}" if privileged_training(standing) else ""
+    runs = f" ({standing.n_runs} runs)" if standing.n_runs > 1 else ""
+    return f"{standing.entry.name}{mark}{runs}"
+
+
+def runs_note(board: SuiteBoard) -> str:
+    """The legend's note on standings of several training runs ('' when the board has none)."""
+    if not any(s.n_runs > 1 for s in board.standings):
+        return ""
+    return ("(n runs): the method's n training runs, one standing: 2^S of the interquartile mean over runs of each "
+            "run's S (rliable; the mean for up to 3 runs), 95% CI over runs, families and seeds; the other columns "
+            "are the run-mean's.")
+
+
 
 def fmt(value: float | None, digits: int = 3) -> str:
     """Fixed-point text, or an em dash for a missing value."""
@@ -379,6 +452,8 @@ def task_rmse(entry: LeaderboardEntry, task: str) -> float | None:
 
 
 __all__ = [
+    "PRIVILEGED_TRAINING_MARK",
+    "PRIVILEGED_TRAINING_NOTE",
     "UNIFORM_ENTRY_POINT",
     "Column",
     "ColumnScore",
@@ -395,8 +470,11 @@ __all__ = [
     "fmt_pct",
     "fmt_score",
     "fmt_times",
+    "method_label",
+    "privileged_training",
     "reference_entry",
     "registered_track",
+    "runs_note",
     "short_task",
     "split_ranked",
     "status",

@@ -1,11 +1,15 @@
-"""Views of the store: a terminal table, the static HTML site, CSV/JSON exports.
+"""Views of the store: the terminal tables (accuracy and compute), the static HTML site, the exports.
 
 Methods are ranked per suite by the score (``2^S``: how many times lower the error is than
 the standard CEKF's, with its 95 % CI), beside the gap closed towards the information bound
 and the task coverage ``k/T``; partial coverage is ranked in its own table and privileged
 methods (those that read ground truth) are shown apart, not ranked (see
 :mod:`swarmloc.leaderboard.site.ranking`). The terminal table fits 100 columns: one column per
-task family, or per task of one family (``family=``) or of a list (``tasks=``).
+task family, or per task of one family (``family=``) or of a list (``tasks=``). ``‡`` marks a
+method fitted to privileged labels while training, ``(n runs)`` a method's n training runs shown as
+one standing. The compute view (``view="compute"``) gives, beside the same order, each method's
+delay per update against the 50 ms budget and its FLOPs per channel
+(:mod:`swarmloc.leaderboard.site.compute`). The exports are :mod:`swarmloc.leaderboard.site.export`'s.
 
 Every submitted string is treated as data: escaped with ``html.escape`` in HTML
 (:mod:`swarmloc.leaderboard.site.html`), shown as literal ``rich.text.Text`` in the
@@ -15,9 +19,6 @@ terminal, and guarded against spreadsheet formula injection in CSV.
 from __future__ import annotations
 
 import contextlib
-import csv
-import io
-import json
 import sys
 from collections.abc import Iterator, Sequence
 from typing import Any, Literal
@@ -29,25 +30,33 @@ from rich.text import Text
 
 from swarmloc.bench.scoring.score import SuiteScore
 from swarmloc.leaderboard.errors import StoreError
+from swarmloc.leaderboard.site.compute import DELAY_BUDGET_MS, compute_rows, place
+from swarmloc.leaderboard.site.export import ExportFormat, export
 from swarmloc.leaderboard.site.html import render_html
 from swarmloc.leaderboard.site.ranking import (
+    PRIVILEGED_TRAINING_NOTE,
     Column,
     Standing,
     SuiteBoard,
     by_suite,
     column_score,
     family_columns,
+    fmt,
     fmt_pct,
     fmt_times,
+    method_label,
+    privileged_training,
+    runs_note,
     split_ranked,
     suite_board,
     task_columns,
-    task_rmse,
+    task_label,
     track_boards,
 )
-from swarmloc.leaderboard.store.database import LeaderboardEntry, LeaderboardStore
+from swarmloc.leaderboard.store.database import LeaderboardStore
 
-ExportFormat = Literal["csv", "json"]
+View = Literal["accuracy", "compute"]
+VIEWS: tuple[str, ...] = ("accuracy", "compute")
 
 #: the terminal table is laid out for this many columns
 TERMINAL_WIDTH = 100
@@ -145,7 +154,7 @@ def _rich_table(standings: Sequence[Standing], columns: Sequence[Column], n_task
         shown = standing.separable_rank if standing.separable_rank is not None else standing.rank
         cells = [Text(str(shown))] if ranked else []
         ci = "—" if score is None else "–".join(fmt_times(x) for x in score.times_ci)
-        cells += [Text(standing.entry.name), Text(standing.entry.track),
+        cells += [Text(method_label(standing)), Text(standing.entry.track),
                   Text(fmt_times(score.times if score else None)), Text(ci)]
         cells += [Text(_cooperation_text(score))] if cooperation else []
         cells += [Text(fmt_pct(score.gap_closed if score else None))] + ([Text(f"{k}/{n}")] if coverage else [])
@@ -202,7 +211,7 @@ def board_tables(board: SuiteBoard, family: str | None = None,
               f"gain (to the information bound) closed, mean over tasks where it is defined. Tasks: "
               f"covered/total. {what.capitalize()} columns: × uniform over the {what}'s tasks (* some not "
               f"covered).")
-    out.append(Text(legend + _filled_note(board), style=LEGEND_STYLE))
+    out.append(Text(legend + _made_note(board) + _filled_note(board), style=LEGEND_STYLE))
     return out
 
 
@@ -254,8 +263,15 @@ def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: st
               "each UAV localizing alone (non-cooperative), with its CI. Gap: share of the achievable gain (to the "
               "information bound) closed. Tasks: covered/total on the track. Other columns: × uniform over the "
               "family's or task's tasks (* some not covered).")
-    out.append(Text(legend + _filled_note(board), style=LEGEND_STYLE))
+    out.append(Text(legend + _made_note(board) + _filled_note(board), style=LEGEND_STYLE))
     return out
+
+
+def _made_note(board: SuiteBoard) -> str:
+    """The legend's notes on how the methods were made: ‡ and (n runs), where the board has them ('' if not)."""
+    notes = [PRIVILEGED_TRAINING_NOTE] if any(privileged_training(s) for s in board.standings) else []
+    notes += [runs_note(board)] if runs_note(board) else []
+    return "".join(f" {note}" for note in notes)
 
 
 def _filled_note(board) -> str:
@@ -267,36 +283,90 @@ def _filled_note(board) -> str:
             f" (#{ref.id if ref else '?'}): their results files predate it.")
 
 
+def _compute_table(board: SuiteBoard) -> Table:
+    """One board's compute view: the accuracy order, 2^S beside the delay per update, its worst task, the tasks
+    over the budget and the FLOPs per channel."""
+    table = Table(header_style="bold", box=box.SIMPLE_HEAD, padding=(0, 1, 0, 0), show_edge=False)
+    number: dict[str, Any] = {"justify": "right", "no_wrap": True}
+    table.add_column(Text("#"), **number)
+    table.add_column(Text("Method"), overflow="fold", max_width=METHOD_WIDTH + 8)
+    table.add_column(Text("Trk"), justify="center", no_wrap=True)
+    table.add_column(Text("2^S"), **number)
+    table.add_column(Text("Delay/update\n[ms]"), **number)
+    table.add_column(Text("Worst task\n[ms]"), **number)
+    table.add_column(Text(f"Over\n{DELAY_BUDGET_MS:g} ms"), **number)
+    table.add_column(Text("FLOPs/\nchannel"), **number)
+    for standing, cost in compute_rows(board):
+        score = standing.score
+        worst = "—" if cost.worst_task is None else f"{task_label(cost.worst_task[0])} {fmt(cost.worst_task[1], 2)}"
+        table.add_row(Text(place(board, standing)), Text(method_label(standing)),
+                      Text(standing.entry.track), Text(fmt_times(score.times if score else None)),
+                      Text("not measured" if cost.delay_ms is None else fmt(cost.delay_ms, 2)), Text(worst),
+                      Text("—" if cost.delay_ms is None else f"{cost.over_budget}/{cost.measured}"),
+                      Text("—" if cost.flops_per_channel is None else f"{cost.flops_per_channel:,.0f}"))
+    return table
+
+
+def compute_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard]) -> list[Table | Text]:
+    """The terminal compute view of a suite (per track for a benchmark v2 suite), in the accuracy tables' order.
+
+    Args:
+        board: the suite's board.
+        per_track: track → its board (empty for a v1 suite).
+    """
+    out: list[Table | Text] = []
+    suite = f"{board.name} v{board.version}"
+    for track, tb in (per_track.items() if per_track else [(None, board)]):
+        where = suite if track is None else f"{suite}, {track} track"
+        out += [Text(f"swarmloc compute — suite {where} (the accuracy order; budget {DELAY_BUDGET_MS:g} ms per "
+                     f"update)", style="bold"), _compute_table(tb)]
+    legend = (f"Delay/update: compute time per UAV-step, filter + the method's FLOPs on the processor profile "
+              f"(results' delay_ms), mean over the tasks; not measured where the method reports no FLOPs. Worst "
+              f"task: the task of the highest mean delay. Over {DELAY_BUDGET_MS:g} ms: tasks whose mean delay "
+              f"exceeds the standard reward's T_max (madrl's budget), of those measured. FLOPs/channel: what the "
+              f"method declares per present channel and step (— where it declares none). #: the accuracy tables' (p: "
+              f"partial coverage).")
+    out.append(Text(legend + _made_note(board), style=LEGEND_STYLE))
+    return out
+
+
 def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family: str | None = None,
-                       tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
-    """Rich renderables: per suite, the tables of :func:`board_tables`.
+                       tasks: str | Sequence[str] | None = None, view: View = "accuracy") -> list[Table | Text]:
+    """Rich renderables: per suite, the tables of :func:`board_tables`, or of :func:`compute_tables`.
 
     Args:
         store: The store to read.
         suite: Only this suite name (all suites when None).
-        family, tasks: per-task columns of one family or of these tasks (default: per family).
+        family, tasks: per-task columns of one family or of these tasks (default: per family; accuracy view).
+        view: ``"accuracy"`` (the ranking) or ``"compute"`` (delay per update and FLOPs, same order).
 
     Returns:
         The tables and legends, in display order (empty when the store has no entries); a benchmark v2
         suite's per track (:func:`track_tables`).
 
     Raises:
-        ValueError: an unknown family or task (see :func:`board_columns`).
+        ValueError: an unknown view, family or task (see :func:`board_columns`).
     """
+    if view not in VIEWS:
+        raise ValueError(f"unknown view {view!r}; allowed: {', '.join(map(repr, VIEWS))}")
     parts: list[Table | Text] = []
     for (name, version), group in by_suite(store.entries(suite)).items():
         board = suite_board(name, version, group)
         per_track = track_boards(board, group)
-        parts += track_tables(board, per_track, family, tasks) if per_track else board_tables(board, family, tasks)
+        if view == "compute":
+            parts += compute_tables(board, per_track)
+        else:
+            parts += track_tables(board, per_track, family, tasks) if per_track else board_tables(board, family, tasks)
     return parts
 
 
 def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console: Console | None = None,
-                      family: str | None = None, tasks: str | Sequence[str] | None = None) -> None:
+                      family: str | None = None, tasks: str | Sequence[str] | None = None,
+                      view: View = "accuracy") -> None:
     """Print the terminal leaderboard (see :func:`leaderboard_tables`)."""
     # Piped output has no terminal width to fit: use the width the table is laid out for.
     out = console or (Console() if sys.stdout.isatty() else Console(width=TERMINAL_WIDTH))
-    parts = leaderboard_tables(store, suite, family, tasks)
+    parts = leaderboard_tables(store, suite, family, tasks, view)
     if not parts:
         out.print(Text(f"The leaderboard at {store.url} is empty."))
     for part in parts:
@@ -305,140 +375,15 @@ def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console
             out.print()
 
 
-# -- export --------------------------------------------------------------------------
-
-
-def _export_rows(entries: Sequence[LeaderboardEntry]) -> list[dict[str, Any]]:
-    """Every board's rows: a v1 suite's board, or each track's board of a v2 suite (never one mixing tracks)."""
-    rows = []
-    for (name, version), group in by_suite(entries).items():
-        board = suite_board(name, version, group)
-        per_track = track_boards(board, group)
-        for track, track_board in (per_track.items() if per_track else [(None, board)]):
-            rows += _board_rows(track_board, track)
-    return rows
-
-
-def _board_rows(board: SuiteBoard, track: str | None) -> list[dict[str, Any]]:
-    """The rows of one board; a v2 track's carry ``suite_track`` and the cooperation gain (``C``, ``cooperation_*``)."""
-    rows = []
-    for table, standings in (("ranked", board.ranked), ("partial", board.partial),
-                             ("privileged", board.privileged)):
-        for standing in standings:
-            entry, score = standing.entry, standing.score
-            k, n = standing.coverage(len(board.tasks))
-            gain = None if score is None else score.cooperation
-            row: dict[str, Any] = {
-                "id": entry.id,
-                "suite": entry.suite_name,
-                "suite_version": entry.suite_version,
-                **({} if track is None else {"suite_track": track}),
-                "rank": standing.rank if table == "ranked" else None,
-                "name": entry.name,
-                "authors": entry.authors,
-                "url": entry.url,
-                "track": entry.track,
-                "privileged": entry.privileged,
-                "deterministic": entry.deterministic,
-                "verified": entry.verified,
-                "trusted": entry.trusted,
-                "table": table,
-                "partial_rank": standing.rank if table == "partial" else None,
-                "separable_rank": standing.separable_rank,
-                "times_uniform": score.times if score else None,
-                "times_ci_low": score.times_ci[0] if score else None,
-                "times_ci_high": score.times_ci[1] if score else None,
-                "S": score.S if score else None,
-                **({} if track is None else {
-                    "cooperation_times": None if gain is None else 2.0**gain.S,
-                    "cooperation_ci_low": None if gain is None else 2.0**gain.ci_low,
-                    "cooperation_ci_high": None if gain is None else 2.0**gain.ci_high,
-                    "C": None if gain is None else gain.S,
-                }),
-                "iqm_gain": score.iqm if score else None,
-                "gap_closed": score.gap_closed if score else None,
-                "tasks_covered": k,
-                "tasks_total": n,
-                "uniform_rmse_filled": standing.filled,
-                "delay_ms": entry.delay_ms,
-                "energy_j": entry.energy_j,
-                "jitter": entry.jitter,
-            }
-            for task in board.tasks:
-                t = score.tasks.get(task) if score else None
-                row[f"times[{task}]"] = None if t is None else 2.0**t.mean
-                row[f"gap_closed[{task}]"] = None if t is None else t.gap_closed
-                row[f"rmse[{task}]"] = task_rmse(entry, task)
-            row.update(
-                entry_point=entry.entry_point,
-                method_hash=entry.method_hash,
-                created_utc=entry.created_utc.isoformat(),
-            )
-            rows.append(row)
-    return rows
-
-
-def _csv_safe(value: Any) -> Any:
-    """Neutralize spreadsheet formulas in text cells (OWASP CSV injection)."""
-    if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
-        return "'" + value
-    return value
-
-
-def export(store: LeaderboardStore, format: ExportFormat = "csv", suite: str | None = None) -> str:
-    """The leaderboard as CSV or JSON text.
-
-    One row per submission and board, in board order: a v1 suite's board, or each track's board of a
-    benchmark v2 suite (scores never mix tracks: such a row carries ``suite_track`` and is scored on
-    that track's tasks only, with the cooperation gain ``cooperation_times`` = 2^C, its CI and ``C``).
-    Then: suite, rank (empty outside the ranked table),
-    metadata, ``table`` (``ranked``, ``partial`` or ``privileged``), ``partial_rank`` and
-    ``separable_rank`` (1 + the ranked methods ahead beyond doubt; empty outside the ranked table),
-    the score (``times_uniform`` = 2^S with its CI, ``S``, ``iqm_gain``, ``gap_closed``,
-    ``tasks_covered``/``tasks_total``, ``uniform_rmse_filled`` — episodes scored through the
-    uniform fallback), mean delay/energy/jitter,
-    per task ``times[<task>]`` (2^G_t), ``gap_closed[<task>]`` and the mean RMSE
-    ``rmse[<task>]``, entry point, method hash, submission time. JSON rows also carry
-    ``task_aggregates`` (every metric's mean, IQM and CI per task). Text cells in CSV
-    that start with ``= + - @`` are prefixed with ``'`` so spreadsheets do not run them.
-
-    Args:
-        store: The store to read.
-        format: ``"csv"`` or ``"json"``.
-        suite: Only this suite name (all suites when None).
-
-    Returns:
-        The exported text.
-    """
-    entries = store.entries(suite)
-    rows = _export_rows(entries)
-    if format == "json":
-        by_id = {e.id: e for e in entries}
-        for row in rows:
-            row["task_aggregates"] = {
-                task: {m: agg.model_dump() for m, agg in per.items()}
-                for task, per in sorted(by_id[row["id"]].task_aggregates.items())
-            }
-        return json.dumps(rows, indent=1, allow_nan=False) + "\n"
-    if format != "csv":
-        raise ValueError(f"unknown export format {format!r}; allowed: 'csv', 'json'")
-    buffer = io.StringIO()
-    fields: list[str] = []
-    for row in rows:
-        fields += [k for k in row if k not in fields]
-    writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: _csv_safe(v) for k, v in row.items()})
-    return buffer.getvalue()
-
-
 __all__ = [
     "TERMINAL_WIDTH",
+    "VIEWS",
     "ExportFormat",
+    "View",
     "board_columns",
     "board_tables",
     "by_suite",
+    "compute_tables",
     "export",
     "leaderboard_tables",
     "print_leaderboard",

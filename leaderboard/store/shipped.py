@@ -6,15 +6,22 @@ path with ``trust=True`` (no re-run: they are the reference methods) and every o
 fresh clone shows a populated leaderboard. An entry already in the store with the same results is
 left as it is; one whose results differ from the shipped file (a release changed how the method
 runs, not its name or weights, so its hash is the same) is replaced.
+
+A learned method ships one file per training run, ``<method>.seed<k>.json`` (evaluated with that
+run's ``--weights``, so the file names the weights by hash and its ``run``), beside ``<method>.json``,
+the run its rule chose. They are stored with their weights file (``bench.evaluation.shipped.shipped_weights``);
+the files that declare a run go first, and a later file of the same method and weights (the chosen
+run's ``<method>.json``) is not stored again: one run counts once.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarmloc.bench.evaluation.results import read_results_file
-from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, shipped_results
+from swarmloc.bench.evaluation.results import ResultsFile, read_results_file
+from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, shipped_results, shipped_weights
 from swarmloc.leaderboard.errors import DuplicateSubmission
 from swarmloc.leaderboard.store.database import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 from swarmloc.leaderboard.submit.pipeline import submit
@@ -57,24 +64,33 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
     """
     stored, present, refused, replaced = [], [], [], []
     shipped: dict[str, dict[str, str]] = {}  # suite -> method hash -> results text of its trusted entries
-    for path in shipped_results(results_dir):
-        file = read_results_file(path)  # read once: compared with the store, then submitted as read
-        results = file.results
+    loaded: set[tuple[str, str, str]] = set()  # (suite, entry point, weights hash) of the files with weights seen
+    for file in _runs_first(read_results_file(path) for path in shipped_results(results_dir)):
+        path, results = file.path, file.results  # read once: compared with the store, then submitted as read
         name = results.method.name
         suite = results.suite.name
         if suite not in shipped:
             shipped[suite] = {e.method_hash: e.results_json for e in store.entries(suite) if e.trusted}
-        if file.text in shipped[suite].values():  # stored as shipped: nothing to check
+        weights_sha256 = results.method.weights_sha256
+        run_key = (suite, results.method.entry_point, weights_sha256 or "")
+        seen = run_key in loaded  # a file of the same method and weights came first: the same run
+        if weights_sha256 is not None:
+            loaded.add(run_key)
+        if file.text in shipped[suite].values() or seen:  # stored as shipped, or this run is
             present.append(name)
             continue
         if name not in SHIPPED_REFERENCE_METHODS:
             refused.append((path.name, f"{name!r} is not a shipped reference method"))
             continue
+        weights = None if weights_sha256 is None else shipped_weights(weights_sha256)
+        if weights_sha256 is not None and weights is None:
+            refused.append((path.name, f"its weights (SHA-256 {weights_sha256}) are not among the shipped weights"))
+            continue
         metadata = {"name": name, "authors": "swarmloc reference", "track": results.method.track,
                     "privileged": results.method.privileged,
                     "description": f"shipped reference method {name!r}"}
         try:
-            receipt = submit(file, results.method.entry_point, metadata, trust=True, store=store,
+            receipt = submit(file, results.method.entry_point, metadata, weights=weights, trust=True, store=store,
                              replace_reference=True)
         except DuplicateSubmission:
             present.append(name)
@@ -85,6 +101,12 @@ def load_shipped(store: LeaderboardStore, results_dir: Path | None = None) -> Sh
             if receipt.entry.method_hash in shipped[suite]:
                 replaced.append(name)
     return ShippedLoad(tuple(stored), tuple(present), tuple(refused), tuple(replaced))
+
+
+def _runs_first(files: Iterable[ResultsFile]) -> list[ResultsFile]:
+    """The files that declare a training run before those that do not, each group in the order given."""
+    files = list(files)
+    return [f for f in files if f.results.method.run is not None] + [f for f in files if f.results.method.run is None]
 
 
 def show_leaderboard(out: Path, db_url: str | None = None, console=None) -> Path:
