@@ -7,23 +7,21 @@ submitted string goes through ``html.escape``.
 
 from __future__ import annotations
 
-import html
-import json
 import shutil
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from swarmloc.bench.evaluation.results import METRIC_NAMES
 from swarmloc.bench.scoring.families import group_by_family
 from swarmloc.bench.scoring.score import SuiteScore, score_version
 from swarmloc.leaderboard.site.compute import DELAY_BUDGET_MS, compute_rows, place
+from swarmloc.leaderboard.site.markup import escape, made_marks, num_cell, page
+from swarmloc.leaderboard.site.method_page import write_method
 from swarmloc.leaderboard.site.ranking import (
-    PRIVILEGED_TRAINING_MARK,
     PRIVILEGED_TRAINING_NOTE,
     Column,
     Standing,
@@ -34,7 +32,6 @@ from swarmloc.leaderboard.site.ranking import (
     family_columns,
     fmt,
     fmt_pct,
-    fmt_score,
     fmt_times,
     privileged_training,
     runs_note,
@@ -42,7 +39,7 @@ from swarmloc.leaderboard.site.ranking import (
     suite_board,
     track_boards,
 )
-from swarmloc.leaderboard.store.database import LeaderboardEntry, LeaderboardStore
+from swarmloc.leaderboard.store.database import LeaderboardStore
 
 if TYPE_CHECKING:
     from swarmloc.leaderboard.site.plots import SitePlot
@@ -53,46 +50,15 @@ _STATIC_FILES = ("leaderboard.css", "leaderboard.js")
 COOPERATIVE_TRACK = "cooperative"
 _COOPERATION_TIP = ("cooperation gain: × lower error than each UAV localizing alone (non-cooperative), score v2, "
                     "hierarchical-bootstrap 95% CI")
-_PLOT_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg", ".webp")
-_CSP = (
-    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
-    "base-uri 'none'; form-action 'none'"
-)
-
-
-def _e(value: object) -> str:
-    """HTML-escape any value (quotes included, so it is safe in attributes)."""
-    return html.escape(str(value), quote=True)
-
-
-def _page(title: str, body: str, root: str) -> str:
-    return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-        f"<meta http-equiv=\"Content-Security-Policy\" content=\"{_CSP}\">\n"
-        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
-        "<meta name=\"referrer\" content=\"no-referrer\">\n"
-        f"<title>{_e(title)}</title>\n"
-        f"<link rel=\"stylesheet\" href=\"{root}static/leaderboard.css\">\n"
-        f"<script src=\"{root}static/leaderboard.js\" defer></script>\n"
-        f"</head>\n<body>\n{body}\n</body>\n</html>\n"
-    )
-
-
-def _num_cell(value: float | None, text: str, title: str | None = None) -> str:
-    data = "" if value is None else repr(float(value))
-    tip = "" if title is None else f" title=\"{_e(title)}\""
-    return f"<td class=\"num\" data-value=\"{data}\"{tip}>{_e(text)}</td>"
-
-
 def _column_cell(standing: Standing, column: Column) -> str:
     """A family (or task) cell: 2^G over its covered tasks; the worst task on hover."""
     cs = column_score(standing.score, column)
     if cs is None:
-        return _num_cell(None, "—", f"{column.title}: not covered")
+        return num_cell(None, "—", f"{column.title}: not covered")
     tip = f"worst task: {cs.worst_task} ({fmt_times(cs.worst_times)}× uniform)"
     if cs.covered < cs.total:
         tip += f"; {cs.covered} of {cs.total} tasks covered"
-    return _num_cell(cs.times, fmt_times(cs.times) + ("" if cs.covered == cs.total else "*"), tip)
+    return num_cell(cs.times, fmt_times(cs.times) + ("" if cs.covered == cs.total else "*"), tip)
 
 
 def _score_tip(board: SuiteBoard, standing: Standing) -> str | None:
@@ -114,31 +80,18 @@ def _cooperation_cell(score: SuiteScore | None) -> str:
     """The cooperation gain ``2^C [low, high]`` of a v2 standing (a dash without a non-cooperative entry)."""
     gain = None if score is None else score.cooperation
     if gain is None:
-        return _num_cell(None, "—", "no cooperation gain: the suite has no stored non-cooperative entry")
+        return num_cell(None, "—", "no cooperation gain: the suite has no stored non-cooperative entry")
     low, high = 2.0**gain.ci_low, 2.0**gain.ci_high
-    return _num_cell(2.0**gain.S, f"{fmt_times(2.0 ** gain.S)} [{fmt_times(low)}, {fmt_times(high)}]",
-                     f"C = {gain.S:.3f}: × lower error than each UAV localizing alone (non-cooperative), "
-                     "hierarchical-bootstrap 95% CI")
-
-
-def _made_marks(standing: Standing) -> str:
-    """After a method's name: ‡ when fitted to privileged labels while training, and its runs when several."""
-    marks = ""
-    if privileged_training(standing):
-        marks += f" <span class=\"mark\" title=\"{_e(PRIVILEGED_TRAINING_NOTE)}\">{PRIVILEGED_TRAINING_MARK}</span>"
-    if standing.over_runs is not None:
-        each = ", ".join(f"run {e.run}: 2^S {fmt_times(2.0 ** s)}" for e, s in zip(standing.entries,
-                                                                                standing.over_runs.runs))
-        marks += (f" <span class=\"runs\" title=\"{_e(f'interquartile mean over {standing.n_runs} training runs ({each})')}"
-                  f"\">({standing.n_runs} runs)</span>")
-    return marks
+    return num_cell(2.0**gain.S, f"{fmt_times(2.0 ** gain.S)} [{fmt_times(low)}, {fmt_times(high)}]",
+                    f"C = {gain.S:.3f}: × lower error than each UAV localizing alone (non-cooperative), "
+                    "hierarchical-bootstrap 95% CI")
 
 
 def _made_notes(board: SuiteBoard) -> str:
     """The notes under a board's tables on ‡ and on standings of several runs ('' where it has neither)."""
     notes = [PRIVILEGED_TRAINING_NOTE] if any(privileged_training(s) for s in board.standings) else []
     notes += [runs_note(board)] if runs_note(board) else []
-    return "".join(f"<p class=\"meta\">{_e(note)}</p>" for note in notes)
+    return "".join(f"<p class=\"meta\">{escape(note)}</p>" for note in notes)
 
 
 def _compute_html(board: SuiteBoard, table_id: str) -> str:
@@ -146,33 +99,34 @@ def _compute_html(board: SuiteBoard, table_id: str) -> str:
     heads = [("#", "number", "the accuracy tables' rank (p: partial coverage; —: privileged)"),
              ("Method", "text", "method name"),
              ("2^S", "number", "× lower error than uniform (the accuracy ranking)"),
-             ("Delay per update [ms]", "number", "compute time per UAV-step, filter + method FLOPs on the processor "
-                                                 "profile (delay_ms), mean over the tasks"),
+             ("Delay per update [ms]", "number", ("compute time per UAV-step, filter + method FLOPs on the processor "
+                                                  "profile (delay_ms), mean over the tasks")),
              ("Worst task [ms]", "number", "the task of the highest mean delay"),
-             (f"Over {DELAY_BUDGET_MS:g} ms", "number", f"tasks whose mean delay exceeds the {DELAY_BUDGET_MS:g} ms "
-                                                        "budget (the standard reward's T_max, madrl), of those measured"),
+             (f"Over {DELAY_BUDGET_MS:g} ms", "number", (f"tasks whose mean delay exceeds the {DELAY_BUDGET_MS:g} ms "
+                                                         "budget (the standard reward's T_max, madrl), of those "
+                                                         "measured")),
              ("FLOPs per channel", "number", "declared by the method, per present channel and step")]
-    head_html = "".join(f"<th scope=\"col\" data-type=\"{kind}\" title=\"{_e(tip)}\"><button type=\"button\">"
-                        f"{_e(label)}</button></th>" for label, kind, tip in heads)
+    head_html = "".join(f"<th scope=\"col\" data-type=\"{kind}\" title=\"{escape(tip)}\"><button type=\"button\">"
+                        f"{escape(label)}</button></th>" for label, kind, tip in heads)
     rows = []
     for i, (standing, cost) in enumerate(compute_rows(board)):
         entry, score = standing.entry, standing.score
         worst = cost.worst_task
         cells = [
-            _num_cell(i, place(board, standing)),  # sorts back to the accuracy order
-            f"<td data-value=\"{_e(entry.name.casefold())}\"><a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a>"
-            f"{_made_marks(standing)}</td>",
-            _num_cell(score.times if score else None, fmt_times(score.times if score else None)),
-            _num_cell(cost.delay_ms, "not measured" if cost.delay_ms is None else fmt(cost.delay_ms, 2)),
-            _num_cell(None if worst is None else worst[1], "—" if worst is None else fmt(worst[1], 2),
-                      None if worst is None else worst[0]),
-            _num_cell(cost.over_budget if cost.measured else None,
-                      "—" if not cost.measured else f"{cost.over_budget}/{cost.measured}"),
-            _num_cell(cost.flops_per_channel,
-                      "—" if cost.flops_per_channel is None else f"{cost.flops_per_channel:,.0f}"),
+            num_cell(i, place(board, standing)),  # sorts back to the accuracy order
+            (f"<td data-value=\"{escape(entry.name.casefold())}\"><a href=\"methods/{entry.id}.html\">"
+             f"{escape(entry.name)}</a>{made_marks(standing)}</td>"),
+            num_cell(score.times if score else None, fmt_times(score.times if score else None)),
+            num_cell(cost.delay_ms, "not measured" if cost.delay_ms is None else fmt(cost.delay_ms, 2)),
+            num_cell(None if worst is None else worst[1], "—" if worst is None else fmt(worst[1], 2),
+                     None if worst is None else worst[0]),
+            num_cell(cost.over_budget if cost.measured else None,
+                     "—" if not cost.measured else f"{cost.over_budget}/{cost.measured}"),
+            num_cell(cost.flops_per_channel,
+                     "—" if cost.flops_per_channel is None else f"{cost.flops_per_channel:,.0f}"),
         ]
         rows.append(f"<tr data-method-id=\"{entry.id}\">{''.join(cells)}</tr>")
-    return (f"<table class=\"sortable\" id=\"{_e(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n<tbody>\n"
+    return (f"<table class=\"sortable\" id=\"{escape(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n<tbody>\n"
             + "\n".join(rows) + "\n</tbody>\n</table>")
 
 
@@ -206,8 +160,8 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
         ("Status", "text", "verification status"),
     ]
     head_html = "".join(
-        f"<th scope=\"col\" data-type=\"{kind}\" title=\"{_e(tip)}\">"
-        f"<button type=\"button\">{_e(label)}</button></th>"
+        f"<th scope=\"col\" data-type=\"{kind}\" title=\"{escape(tip)}\">"
+        f"<button type=\"button\">{escape(label)}</button></th>"
         for label, kind, tip in heads
     )
     rows = []
@@ -218,25 +172,25 @@ def _html_table(board: SuiteBoard, standings: Sequence[Standing], columns: Seque
         cells = [f"<td class=\"num\" data-value=\"{standing.rank}\">{shown}</td>"] if ranked else []
         low_high = score.times_ci if score else None
         cells += [
-            f"<td data-value=\"{_e(entry.name.casefold())}\">"
-            f"<a href=\"methods/{entry.id}.html\">{_e(entry.name)}</a>{_made_marks(standing)}</td>",
-            f"<td data-value=\"{_e(entry.track)}\">{_e(entry.track)}</td>",
-            _num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
-                      _score_tip(board, standing)),
-            _num_cell(low_high[0] if low_high else None,
-                      "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
+            f"<td data-value=\"{escape(entry.name.casefold())}\">"
+            f"<a href=\"methods/{entry.id}.html\">{escape(entry.name)}</a>{made_marks(standing)}</td>",
+            f"<td data-value=\"{escape(entry.track)}\">{escape(entry.track)}</td>",
+            num_cell(score.times if score else None, fmt_times(score.times) if score else "—",
+                     _score_tip(board, standing)),
+            num_cell(low_high[0] if low_high else None,
+                     "—" if low_high is None else f"[{fmt_times(low_high[0])}, {fmt_times(low_high[1])}]"),
             *([_cooperation_cell(score)] if cooperation else []),
-            _num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
-            _num_cell(k, f"{k}/{n}"),
+            num_cell(score.gap_closed if score else None, fmt_pct(score.gap_closed if score else None)),
+            num_cell(k, f"{k}/{n}"),
             *(_column_cell(standing, c) for c in columns),
-            _num_cell(entry.delay_ms, fmt(entry.delay_ms, 2)),
-            _num_cell(entry.energy_j, fmt(entry.energy_j, 3)),
-            _num_cell(entry.jitter, fmt(entry.jitter, 4)),
-            f"<td data-value=\"{_e(status(entry))}\">{_e(status(entry))}</td>",
+            num_cell(entry.delay_ms, fmt(entry.delay_ms, 2)),
+            num_cell(entry.energy_j, fmt(entry.energy_j, 3)),
+            num_cell(entry.jitter, fmt(entry.jitter, 4)),
+            f"<td data-value=\"{escape(status(entry))}\">{escape(status(entry))}</td>",
         ]
         rows.append(f"<tr data-method-id=\"{entry.id}\">{''.join(cells)}</tr>")
     return (
-        f"<table class=\"sortable\" id=\"{_e(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n"
+        f"<table class=\"sortable\" id=\"{escape(table_id)}\">\n<thead><tr>{head_html}</tr></thead>\n"
         f"<tbody>\n" + "\n".join(rows) + "\n</tbody>\n</table>"
     )
 
@@ -248,8 +202,8 @@ def _slug(*parts: str) -> str:
 
 def _figure_list(plots: Sequence[SitePlot], root: Path) -> str:
     figures = "\n".join(
-        f"<figure><img src=\"{_e(quote(p.path.relative_to(root).as_posix()))}\" alt=\"{_e(p.alt)}\">"
-        f"<figcaption>{_e(p.caption)}</figcaption></figure>"
+        f"<figure><img src=\"{escape(quote(p.path.relative_to(root).as_posix()))}\" alt=\"{escape(p.alt)}\">"
+        f"<figcaption>{escape(p.caption)}</figcaption></figure>"
         for p in plots
     )
     return f"<div class=\"plots suite-plots\">{figures}</div>"
@@ -306,10 +260,10 @@ def _track_sections(slug: str, sections: Sequence[TrackSection], root: Path) -> 
         families = group_by_family(section.board.tasks)
         listed = ", ".join(f"{family} ({len(tasks)})" for family, tasks in families.items())
         track_slug = _slug(section.track)
-        parts.append(f"<section class=\"track\" id=\"track-{_e(slug)}-{_e(track_slug)}\">")
-        parts.append(f"<h3>{_e(section.title)}</h3>")
+        parts.append(f"<section class=\"track\" id=\"track-{escape(slug)}-{escape(track_slug)}\">")
+        parts.append(f"<h3>{escape(section.title)}</h3>")
         parts.append(f"<p class=\"meta\">{len(section.board.tasks)} tasks in {len(families)} families: "
-                     f"{_e(listed)}.</p>")
+                     f"{escape(listed)}.</p>")
         parts += _board_tables(section.board, family_columns(section.board.tasks), f"{slug}-{track_slug}",
                                what="track", heading="h4", cooperation=section.track == COOPERATIVE_TRACK)
         if section.plots:
@@ -325,7 +279,7 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
     generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     parts = [
         "<header><h1>swarmloc leaderboard</h1>",
-        f"<p class=\"meta\">Generated {_e(generated)}. Methods are ranked by 2^S, how many "
+        f"<p class=\"meta\">Generated {escape(generated)}. Methods are ranked by 2^S, how many "
         "times lower the position error is than the standard CEKF's (uniform trust), the geometric mean "
         "over the suite's tasks, with a stratified-bootstrap 95% CI. Family columns give × uniform over "
         "the family's tasks (hover for the worst task). Click a column header to sort.</p></header>",
@@ -336,7 +290,7 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
     for board in boards:
         slug = _slug(board.name, board.version)
         parts.append(f"<section class=\"suite\" id=\"suite-{slug}\">")
-        parts.append(f"<h2>Suite {_e(board.name)} <span class=\"version\">v{_e(board.version)}</span></h2>")
+        parts.append(f"<h2>Suite {escape(board.name)} <span class=\"version\">v{escape(board.version)}</span></h2>")
         if not (tracks and tracks.get(slug)):  # a v2 suite's tables are its tracks'
             parts += _board_tables(board, family_columns(board.tasks), slug)
         if board.filled:
@@ -353,152 +307,7 @@ def _index_html(boards: Sequence[SuiteBoard], plots: dict[str, list[SitePlot]], 
             parts.append(_figures(plots.get(slug, []), root))
         parts.append("</section>")
     parts.append("</main>")
-    return _page("swarmloc leaderboard", "\n".join(parts), root="")
-
-
-def _definition_rows(rows: Iterable[tuple[str, str]]) -> str:
-    return "\n".join(f"<tr><th scope=\"row\">{_e(k)}</th><td>{v}</td></tr>" for k, v in rows)
-
-
-def _make_plots(results_file: Path, plots_dir: Path) -> tuple[list[Path], str | None]:
-    """Call ``swarmloc.bench.reports.plots.plot_results`` if it exists; (images, error note)."""
-    try:
-        from swarmloc.bench.reports.plots import plot_results  # type: ignore[import-not-found]
-    except ImportError:
-        return [], None
-    plots_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        plot_results(results_file, plots_dir)
-    except Exception as err:  # a broken plot must not take the site down
-        warnings.warn(f"plot_results failed for {results_file}: {err}", stacklevel=2)
-        return [], f"{type(err).__name__}: {err}"
-    images = sorted(p for p in plots_dir.iterdir() if p.suffix.lower() in _PLOT_SUFFIXES)
-    return images, None
-
-
-def _score_text(score: SuiteScore | None, n_tasks: int) -> str:
-    """A method page's score line: 2^S with its CI, S, IQM, gap closed and coverage."""
-    return "—" if score is None else (
-        f"{fmt_score(score)}× lower error than uniform (S = {score.S:.3f}; IQM of the gains "
-        f"{score.iqm:.3f}; gap closed {fmt_pct(score.gap_closed)}; {len(score.tasks)}/{n_tasks} tasks)")
-
-
-def _training_text(standing: Standing) -> str:
-    """How the method was made, for its page (HTML)."""
-    declared = {e.privileged_training for e in standing.entries}
-    if declared == {True}:
-        return _e(f"{PRIVILEGED_TRAINING_MARK} fitted to privileged labels while training (fault or error labels); "
-                  "it runs without them")
-    return "not declared (results file older than schema 6)" if None in declared else "no privileged labels"
-
-
-def _runs_html(standing: Standing) -> str:
-    """A standing of several runs: the IQM over runs and each run's S, with its results file (HTML)."""
-    total = standing.over_runs
-    assert total is not None
-    each = ", ".join(f"run {_e(e.run)}: 2^S {fmt_times(2.0 ** s)} (<a href=\"../results/{e.id}.json\" download>"
-                     f"results</a>)" for e, s in zip(standing.entries, total.runs))
-    return (f"{total.n_runs} training runs, shown as one: 2^S of the interquartile mean over runs "
-            f"{fmt_times(2.0 ** total.S)} [{fmt_times(2.0 ** total.ci_low)}, {fmt_times(2.0 ** total.ci_high)}] "
-            f"(95% CI over runs, families and seeds). {each}. This page shows run {_e(standing.entry.run)}, the run "
-            "nearest the IQM; its per-task table is that run's.")
-
-
-def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
-                 explanation: str = "", tracks: Sequence[tuple[str, Standing, int]] = ()) -> str:
-    """A method's page; ``tracks``: on a v2 suite, (track, its standing on the track's board, the track's task
-    count) for each track (one score line each)."""
-    entry, score = standing.entry, standing.score
-    results = json.loads(entry.results_json)
-    prov = results.get("provenance", {})
-    machine = prov.get("machine", {})
-    url = entry.url
-    url_html = (
-        f"<a href=\"{_e(url)}\" rel=\"nofollow noopener noreferrer\">{_e(url)}</a>"
-        if url and url.startswith(("http://", "https://")) else "—"
-    )
-    about = _definition_rows([
-        ("Authors", _e(entry.authors or "—")),
-        ("URL", url_html),
-        ("Track", _e({"A": "A — link trust", "B": "B — full estimator"}.get(entry.track, entry.track))),
-        ("Privileged", "yes" if entry.privileged else "no"),
-        ("Training", _training_text(standing)),
-        *([("Runs", _runs_html(standing))] if standing.over_runs is not None else []),
-        ("Deterministic", "yes" if entry.deterministic else "no"),
-        ("Status", _e(status(entry))),
-        ("Entry point", f"<code>{_e(entry.entry_point)}</code>"),
-        ("Method hash", f"<code>{_e(entry.method_hash)}</code>"),
-        ("Weights SHA-256", f"<code>{_e(entry.weights_sha256 or '—')}</code>"),
-        ("Suite", _e(f"{entry.suite_name} v{entry.suite_version} ({entry.suite_sha256[:12]}…)")),
-        ("Submitted", _e(entry.created_utc.strftime("%Y-%m-%d %H:%M UTC"))),
-        # a v2 suite: one score per track, never one that mixes them
-        *([(f"Score, {track} track", _e(_score_text(on.score, n))) for track, on, n in tracks]
-          if tracks else [("Score", _e(_score_text(score, n_tasks)))]),
-    ])
-    provenance = _definition_rows([
-        ("swarmloc version", _e(prov.get("package_version", "—"))),
-        ("Git commit", f"<code>{_e(prov.get('git_commit') or '—')}</code>"),
-        ("Created", _e(prov.get("created_utc", "—"))),
-        ("Python", _e(prov.get("python_version", "—"))),
-        ("NumPy", _e(prov.get("numpy_version", "—"))),
-        ("PyTorch", _e(prov.get("torch_version") or "—")),
-        ("Platform", _e(machine.get("platform", "—"))),
-        ("CPUs", _e(machine.get("cpu_count", "—"))),
-    ])
-    present = {m for per in entry.task_aggregates.values() for m in per}
-    metrics = [m for m in METRIC_NAMES if m in present]
-    head = "".join(
-        f"<th scope=\"col\" data-type=\"number\"><button type=\"button\">{_e(m)}</button></th>"
-        for m in ("× uniform", "gap closed", *metrics)
-    )
-    body_rows = []
-    for task in sorted(entry.task_aggregates):
-        t = score.tasks.get(task) if score else None
-        cells = [
-            _num_cell(None if t is None else 2.0**t.mean, "—" if t is None else fmt_times(2.0**t.mean),
-                      None if t is None else f"G_t = {t.mean:.3f} (mean log2 gain over {t.gains.size} seeds)"),
-            _num_cell(None if t is None else t.gap_closed, fmt_pct(None if t is None else t.gap_closed)),
-        ]
-        for m in metrics:
-            agg = entry.task_aggregates[task].get(m)
-            if agg is None:
-                cells.append("<td class=\"num\" data-value=\"\">—</td>")
-            else:
-                tip = f"IQM {agg.iqm:.4g}, 95% CI [{agg.ci_low:.4g}, {agg.ci_high:.4g}]"
-                cells.append(f"<td class=\"num\" data-value=\"{agg.mean!r}\" title=\"{_e(tip)}\">"
-                             f"{_e(f'{agg.mean:.4g}')}</td>")
-        body_rows.append(f"<tr><th scope=\"row\" data-value=\"{_e(task)}\">{_e(task)}</th>"
-                         f"{''.join(cells)}</tr>")
-    per_task = (
-        "<table class=\"sortable\" id=\"per-task\">\n<thead><tr><th scope=\"col\" data-type=\"text\">"
-        f"<button type=\"button\">Task</button></th>{head}</tr></thead>\n<tbody>\n"
-        + "\n".join(body_rows) + "\n</tbody>\n</table>"
-    )
-    plots = ""
-    if images:
-        figures = "\n".join(
-            f"<figure><img src=\"../plots/{entry.id}/{_e(quote(p.name))}\" "
-            f"alt=\"{_e(p.stem.replace('_', ' '))}\" loading=\"lazy\"></figure>"
-            for p in images
-        )
-        plots = f"<section><h2>Plots</h2>\n<div class=\"plots\">{figures}</div></section>"
-    elif plot_error:
-        plots = f"<section><h2>Plots</h2><p class=\"meta\">Plots unavailable: {_e(plot_error)}</p></section>"
-    body = "\n".join([
-        "<header><p><a href=\"../index.html\">← leaderboard</a></p>",
-        f"<h1>{_e(entry.name)}</h1></header><main>",
-        f"<p class=\"description\">{_e(entry.description)}</p>" if entry.description else "",
-        f"<section><h2>Method</h2><table class=\"facts\">{about}</table></section>",
-        f"<section><h2>Provenance</h2><table class=\"facts\">{provenance}</table>",
-        f"<p><a href=\"../results/{entry.id}.json\" download>Download the results file</a></p></section>",
-        "<section><h2>Per-task results</h2><p class=\"meta\">× uniform: 2^G_t, G_t the mean over seeds of "
-        "log2(RMSE_uniform / RMSE); metrics: mean over seeds, hover for IQM and 95% CI.</p>\n"
-        f"{per_task}</section>",
-        plots,
-        explanation,
-        "</main>",
-    ])
-    return _page(f"{entry.name} — swarmloc leaderboard", body, root="../")
+    return page("swarmloc leaderboard", "\n".join(parts), root="")
 
 
 def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None = None,
@@ -544,7 +353,7 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
         for standing in board.standings:
             on_tracks = [(track, on, len(tb.tasks)) for track, tb in per_track.items()
                          for on in tb.standings if on.entry is standing.entry]
-            _write_method(out, standing, len(board.tasks), plots, explain, on_tracks)
+            write_method(out, standing, len(board.tasks), plots, explain, on_tracks)
     suite_figures, track_figures = {}, {}
     for board in boards:
         slug = _slug(board.name, board.version)
@@ -586,35 +395,6 @@ def _draw_track_plots(boards: dict[str, SuiteBoard], plots_dir: Path) -> list[Tr
             warnings.warn(f"plots of {board.name} v{board.version}, track {track}, failed: {err}", stacklevel=2)
             sections.append(TrackSection(track, board, ()))
     return sections
-
-
-def _write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False,
-                  tracks: Sequence[tuple[str, Standing, int]] = ()) -> None:
-    """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
-    entry = standing.entry
-    for run in standing.entries:  # every run's results file, for download
-        (out / "results" / f"{run.id}.json").write_text(run.results_json, encoding="utf-8")
-    results_file = out / "results" / f"{entry.id}.json"
-    plots_dir = out / "plots" / str(entry.id)
-    if plots_dir.exists():
-        shutil.rmtree(plots_dir)
-    images, error = _make_plots(results_file, plots_dir) if plots else ([], None)
-    (out / "methods" / f"{entry.id}.html").write_text(
-        _method_html(standing, n_tasks, images, error, _make_explanation(entry, out) if explain else "", tracks),
-        encoding="utf-8",
-    )
-
-
-def _make_explanation(entry: LeaderboardEntry, out: Path) -> str:
-    """The page's explanation section for a shipped Track A method ("" for any other entry)."""
-    from swarmloc.leaderboard.site import explain as site_explain
-    if not site_explain.explainable(entry):
-        return ""
-    try:
-        return site_explain.explanation_section(site_explain.write_explanation(entry, out), None)
-    except Exception as err:  # noqa: BLE001 - a failed explanation must not take the site down
-        warnings.warn(f"explanation of {entry.name} failed: {err}", stacklevel=2)
-        return site_explain.explanation_section(None, f"{type(err).__name__}: {err}")
 
 
 __all__ = ["render_html"]

@@ -393,7 +393,8 @@ def privileged_training(standing: Standing) -> bool:
 
 
 def method_label(standing: Standing) -> str:
-    """The method's name as the tables show it: ``‡`` when fitted to privileged labels, ``(3 runs)`` for several runs."""
+    """The method's name as the tables show it: ``‡`` when fitted to privileged labels, ``(3 runs)`` for
+    several runs."""
     mark = f" {PRIVILEGED_TRAINING_MARK}" if privileged_training(standing) else ""
     runs = f" ({standing.n_runs} runs)" if standing.n_runs > 1 else ""
     return f"{standing.entry.name}{mark}{runs}"
