@@ -1,10 +1,10 @@
-"""The leaderboard in marl-eval's raw-data JSON (InstaDeep's marl-eval; Gorsane et al. 2022, built on rliable).
+"""The leaderboard in marl-eval's raw-data JSON (InstaDeep's marl-eval, [marl-eval]; built on rliable).
 
 marl-eval reads one nested object (its README, "Data Structure for Raw Experiment data")::
 
     {env_name: {task_name: {algorithm_name: {run_name: {
         "step_<k>": {"step_count": int, metric: [one value per evaluation episode], ...},
-        "absolute_metrics": {metric: [values], ...}}}}}}
+        "absolute_metrics": {metric: <the same list>, ...}}}}}}
 
 ``data_process_pipeline`` lower-cases every key and adds ``mean_<metric>`` to every step;
 ``create_matrices_for_rliable`` builds a (runs × tasks) matrix per algorithm from the ``mean_``
