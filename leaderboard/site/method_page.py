@@ -71,7 +71,7 @@ def _runs_html(standing: Standing) -> str:
     return (f"{total.n_runs} training runs, shown as one: 2^S of the interquartile mean over runs "
             f"{fmt_times(2.0 ** total.S)} [{fmt_times(2.0 ** total.ci_low)}, {fmt_times(2.0 ** total.ci_high)}] "
             f"(95% CI over runs, families and seeds). {each}. This page shows run {escape(standing.entry.run)}, "
-            "the run nearest the IQM; its per-task table is that run's.")
+            "the run nearest the IQM: per task, × uniform and gap closed are the run-mean's, the metrics that run's.")
 
 
 def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,

@@ -18,6 +18,7 @@ scores it by the IQM over runs, :mod:`swarmloc.bench.scoring.runs`):
 from __future__ import annotations
 
 import json
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -64,11 +65,15 @@ def without_repeats(runs: Sequence[Run], episodes: Mapping[int, Sequence[Mapping
     """
     preferred = sorted(range(len(runs)), key=lambda i: (runs[i].entry.run is None, runs[i].entry.created_utc,
                                                         runs[i].entry.id or 0))
+    shared = Counter(_method_key(run) for run in runs)  # only entries of a method stored more than once can repeat
     seen_weights: set[tuple[Any, ...]] = set()
     seen_episodes: set[tuple[Any, ...]] = set()
     kept = set()
     for i in preferred:
         key, entry = _method_key(runs[i]), runs[i].entry
+        if shared[key] == 1:
+            kept.add(i)
+            continue
         weights = None if entry.weights_sha256 is None else (*key, entry.weights_sha256)
         text = (*key, _episodes_text(episodes[id(entry)]))
         if (weights is not None and weights in seen_weights) or text in seen_episodes:
