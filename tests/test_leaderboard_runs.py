@@ -263,3 +263,37 @@ def test_the_shipped_chosen_run_is_stored_once(tmp_path: Path) -> None:
         (shipped / "mappo.seed2.json").write_text(json.dumps(raw))
         refused = dict(load_shipped(store, shipped).refused)
         assert "not among the shipped weights" in refused["mappo.seed2.json"]
+
+
+def test_a_v2_suite_shows_the_runs_on_each_track(tmp_path: Path) -> None:
+    """Scores never mix tracks: the runs are one standing on each track's board, with the track's IQM over runs;
+    marl-eval gets one environment per track; every run has its page, with a score line per track."""
+    import dataclasses
+
+    from test_leaderboard_tracks import COOPERATIVE, ROBUST
+    from test_leaderboard_tracks import UNIFORM as V2_UNIFORM
+    from test_leaderboard_tracks import _entry as v2_entry
+
+    with LeaderboardStore(f"sqlite:///{tmp_path / 'lb.db'}") as s:
+        s.add(v2_entry("uniform", dict.fromkeys(V2_UNIFORM, 0.0), i=0))
+        for k, c in ((1, 0.2), (2, 0.8), (3, 0.5)):
+            entry = v2_entry("learned", dict.fromkeys(V2_UNIFORM, c), i=k)
+            s.add(dataclasses.replace(entry, run=k, weights_sha256=f"{k:x}" * 64, privileged_training=True))
+        entries = s.entries()
+        rows = json.loads(views.export(s, "json"))
+        marl = json.loads(views.export(s, "marl-eval"))
+        views.render_html(s, tmp_path / "site", plots=False, explanations=False)
+    per_track = ranking.track_boards(ranking.suite_board("tiny-v2", "1", entries), entries)
+    assert list(per_track) == ["cooperative", "robust-ranging"]
+    for board in per_track.values():
+        learned = next(st for st in board.ranked if st.entry.name == "learned")
+        assert learned.n_runs == 3 and learned.score.S == pytest.approx(0.5)
+    assert [(r["suite_track"], r["runs"]) for r in rows if r["name"] == "learned"] == [
+        ("cooperative", 3), ("robust-ranging", 3)]
+    assert set(marl) == {"swarmloc-tiny-v2-cooperative", "swarmloc-tiny-v2-robust-ranging"}
+    assert set(marl["swarmloc-tiny-v2-cooperative"]) == set(COOPERATIVE)
+    assert set(marl["swarmloc-tiny-v2-robust-ranging"]) == set(ROBUST)
+    for entry in entries[1:]:
+        page = (tmp_path / "site" / "methods" / f"{entry.id}.html").read_text()
+        assert "Score, cooperative track" in page and "Score, robust-ranging track" in page
+        assert f"This page is run {entry.run}'s" in page

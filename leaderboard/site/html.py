@@ -10,6 +10,7 @@ from __future__ import annotations
 import shutil
 import warnings
 from collections.abc import Sequence
+from dataclasses import replace
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
@@ -351,9 +352,12 @@ def render_html(store: LeaderboardStore, out_dir: str | Path, suite: str | None 
     for board in boards:
         per_track = per_track_of[(board.name, board.version)]
         for standing in board.standings:
-            on_tracks = [(track, on, len(tb.tasks)) for track, tb in per_track.items()
-                         for on in tb.standings if on.entry is standing.entry]
-            write_method(out, standing, len(board.tasks), plots, explain, on_tracks)
+            for shown in standing.entries:  # a page per run; plots and the explanation on the table's run's
+                on_tracks = [(track, on, len(tb.tasks)) for track, tb in per_track.items()
+                             for on in tb.standings if any(e is shown for e in on.entries)]
+                first = shown is standing.entry
+                write_method(out, replace(standing, entry=shown), len(board.tasks), plots and first,
+                             explain and first, on_tracks)
     suite_figures, track_figures = {}, {}
     for board in boards:
         slug = _slug(board.name, board.version)

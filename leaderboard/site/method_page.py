@@ -66,12 +66,13 @@ def _runs_html(standing: Standing) -> str:
     """A standing of several runs: the IQM over runs and each run's S, with its results file (HTML)."""
     total = standing.over_runs
     assert total is not None
-    each = ", ".join(f"run {escape(e.run)}: 2^S {fmt_times(2.0 ** s)} (<a href=\"../results/{e.id}.json\" download>"
-                     f"results</a>)" for e, s in zip(standing.entries, total.runs))
+    each = ", ".join(f"<a href=\"{e.id}.html\">run {escape(e.run)}</a>: 2^S {fmt_times(2.0 ** s)} "
+                     f"(<a href=\"../results/{e.id}.json\" download>results</a>)"
+                     for e, s in zip(standing.entries, total.runs))
     return (f"{total.n_runs} training runs, shown as one: 2^S of the interquartile mean over runs "
             f"{fmt_times(2.0 ** total.S)} [{fmt_times(2.0 ** total.ci_low)}, {fmt_times(2.0 ** total.ci_high)}] "
-            f"(95% CI over runs, families and seeds). {each}. This page shows run {escape(standing.entry.run)}, "
-            "the run nearest the IQM: per task, × uniform and gap closed are the run-mean's, the metrics that run's.")
+            f"(95% CI over runs, families and seeds). {each}. This page is run {escape(standing.entry.run)}'s: per "
+            "task, × uniform and gap closed are the run-mean's, the metrics that run's.")
 
 
 def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_error: str | None,
@@ -173,11 +174,13 @@ def _method_html(standing: Standing, n_tasks: int, images: Sequence[Path], plot_
 
 def write_method(out: Path, standing: Standing, n_tasks: int, plots: bool, explain: bool = False,
                  tracks: Sequence[tuple[str, Standing, int]] = ()) -> None:
-    """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation."""
+    """A method's page, results file, (when ``plots``) its plots and (when ``explain``) its explanation.
+
+    A standing of several runs has one page per run (``standing.entry`` the run shown; the render calls this
+    once per run), each with the standing's score and links to the others."""
     entry = standing.entry
-    for run in standing.entries:  # every run's results file, for download
-        (out / "results" / f"{run.id}.json").write_text(run.results_json, encoding="utf-8")
     results_file = out / "results" / f"{entry.id}.json"
+    results_file.write_text(entry.results_json, encoding="utf-8")
     plots_dir = out / "plots" / str(entry.id)
     if plots_dir.exists():
         shutil.rmtree(plots_dir)
