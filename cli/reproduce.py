@@ -296,7 +296,7 @@ class Shipped:
     """Regenerate the shipped reference results of a suite (bench/results/<suite>/<method>.json)."""
 
     methods: tuple[str, ...] = ()
-    """Methods to re-evaluate (default: every method with a shipped file of the suite)."""
+    """Methods, or training runs ``<method>.seed<k>``, to re-evaluate (default: every shipped file of the suite)."""
     suite: str = "standard-v1"
     """standard-v1, standard-v2 or standard-v0."""
     workers: int = 2

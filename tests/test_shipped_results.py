@@ -122,3 +122,10 @@ def test_refresh_bounds_rewrites_the_bound_column_only(tmp_path):
         assert new.metrics.bound_rmse == bound.rmse != 123.0
         assert new.metrics.model_dump(exclude={"bound_rmse"}) == old.metrics.model_dump(exclude={"bound_rmse"})
     assert fresh.score.tasks["swarmloc/Ideal-v1"].achievable is not None
+
+
+def test_regenerating_a_training_run_needs_its_shipped_file():
+    from swarmloc.bench.evaluation.shipped import regenerate
+
+    with pytest.raises(FileNotFoundError, match=r"'uniform\.seed9' has no shipped file"):
+        regenerate(["uniform.seed9"], "standard-v2")

@@ -18,6 +18,8 @@ from pathlib import Path
 
 #: the suite of the default board
 DEFAULT_SUITE = "standard-v1"
+#: a learned method's training runs ship as ``<method>.seed<k>.json`` beside ``<method>.json``
+RUN_SEPARATOR = ".seed"
 #: the shipped results of each suite, default board first
 RESULTS_DIRS: dict[str, Path] = {
     suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v2", "standard-v0")
@@ -55,10 +57,12 @@ def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers:
     """Re-evaluate ``methods`` on a suite into its shipped results folder (traces are not kept).
 
     All methods run in one evaluation, so the references every episode needs (uniform, the
-    information bound) are computed once per worker, not once per method.
+    information bound) are computed once per worker, not once per method. A name
+    ``<method>.seed<k>`` is a learned method's training run: its shipped file is re-evaluated with
+    the weights it names (by SHA-256, ``shipped_weights``), in an evaluation of its own.
 
     Args:
-        methods: method names (default of the command: every method with a shipped file of the suite).
+        methods: method names or training runs (default of the command: every shipped file of the suite).
         suite_name: a suite of ``RESULTS_DIRS``.
         workers: worker processes.
 
@@ -67,9 +71,10 @@ def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers:
 
     Raises:
         KeyError: the suite has no shipped results.
+        FileNotFoundError: a training run has no shipped file, or its weights are not shipped.
         RuntimeError: a job failed (nothing is written).
     """
-    from swarmloc.bench.evaluation.results import write_results
+    from swarmloc.bench.evaluation.results import read_results_file, write_results
     from swarmloc.bench.evaluation.runner import evaluate_methods
     from swarmloc.bench.evaluation.suites import get_suite
 
@@ -78,14 +83,29 @@ def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers:
     results_dir = RESULTS_DIRS[suite_name]
     results_dir.mkdir(parents=True, exist_ok=True)
     suite = get_suite(suite_name)
-    runs = evaluate_methods(list(methods), suite, workers=workers, trace=False)
-    failed = {name: run.failed for name, run in runs.items() if run.failed}
-    if failed:
-        raise RuntimeError(f"not regenerated, some jobs failed: {failed}")
-    written = []
-    for name, run in runs.items():
-        written.append(write_results(results_dir / f"{name}.json", run.results(suite)))
-    return written
+    # (file stem, method, weights or None) of every evaluation: the plain methods together, each run alone
+    plain = [name for name in methods if RUN_SEPARATOR not in name]
+    evaluations: list[list[tuple[str, str, Path | None]]] = [[(name, name, None) for name in plain]] if plain else []
+    for stem in (name for name in methods if RUN_SEPARATOR in name):
+        file = results_dir / f"{stem}.json"
+        if not file.is_file():
+            raise FileNotFoundError(f"training run {stem!r} has no shipped file {file}; write it with "
+                                    f"swarmloc evaluate --weights <its weights>")
+        sha = read_results_file(file).results.method.weights_sha256
+        weights = shipped_weights(sha) if sha else None
+        if weights is None:
+            raise FileNotFoundError(f"the weights of {file.name} (sha256 {sha}) are not among the shipped weights")
+        evaluations.append([(stem, stem.split(RUN_SEPARATOR)[0], weights)])
+    outputs = []
+    for evaluation in evaluations:
+        weights = {method: str(path) for _, method, path in evaluation if path is not None}
+        runs = evaluate_methods([method for _, method, _ in evaluation], suite, workers=workers, trace=False,
+                                weights=weights or None)
+        failed = {name: run.failed for name, run in runs.items() if run.failed}
+        if failed:
+            raise RuntimeError(f"not regenerated, some jobs failed: {failed}")
+        outputs += [(stem, runs[method]) for stem, method, _ in evaluation]
+    return [write_results(results_dir / f"{stem}.json", run.results(suite)) for stem, run in outputs]
 
 
 def refresh_bounds(suite_name: str = DEFAULT_SUITE, results_dir: Path | None = None) -> list[Path]:
