@@ -44,6 +44,7 @@ bench: $(STAMP)
 docs: $(STAMP)
 	$(BIN)/swarmloc docs tasks
 	$(BIN)/swarmloc docs readme
+	$(BIN)/swarmloc docs tuning
 	$(BIN)/python -m mkdocs build --strict
 
 clean:

@@ -86,6 +86,7 @@ COMMANDS: CommandTable = {
     "docs": {
         "readme": "swarmloc.cli.docs_readme",
         "tasks": "swarmloc.cli.docs_tasks",
+        "tuning": "swarmloc.cli.docs_tuning",
     },
 }
 

@@ -34,7 +34,7 @@ def run(opts: Options) -> int:
     from swarmloc.agents.trust.tuned import check_tunable, record_path
     from swarmloc.bench.tuning.search import check_budget, tune, write_record
 
-    console = Console(stderr=True)
+    console = Console(stderr=True, soft_wrap=True)  # a trial per line, also in a log file
     try:
         check_tunable(opts.method)
         check_budget(opts.trials, opts.seed)
@@ -47,7 +47,7 @@ def run(opts: Options) -> int:
     def show(trial: dict) -> None:
         values = ", ".join(f"{k} {v:.4g}" for k, v in trial["params"].items())
         tracks = "  ".join(f"{t} {s:+.3f}" for t, s in trial["S"].items())
-        console.print(f"  trial {trial['number']:3d}  {values:60s}  S: {tracks}  mean {trial['objective']:+.4f}"
+        console.print(f"  trial {trial['number']:3d}  {values:48s}  S: {tracks}  mean {trial['objective']:+.4f}"
                       f"  ({trial['seconds']:.1f} s)")
 
     console.print(f"tuning {opts.method}: {opts.trials} trials, TPE seed {opts.seed}, on dev-v2")

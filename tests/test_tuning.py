@@ -145,3 +145,43 @@ def test_bad_input_is_refused_by_name(capsys):
 def test_a_missing_record_names_the_command_that_writes_it(tmp_path):
     with pytest.raises(FileNotFoundError, match="swarmloc tune huber"):
         load_method("huber-tuned", weights=tmp_path / "absent.json")
+
+
+# --------------------------------------------------------------------------- the shipped records
+
+
+@pytest.mark.parametrize("method", list(TUNABLE))
+def test_the_tuned_factory_builds_the_policy_with_the_shipped_record_s_values(method):
+    record = json.loads(record_path(method).read_text())
+    policy = load_method(f"{method}-tuned").method
+    assert type(policy) is TUNABLE[method]
+    assert {name: getattr(policy, name) for name in record["params"]} == record["params"]
+    assert record["space"] == [asdict(p) for p in search_space(method)]  # the space the code declares
+    assert all(p.contains(record["params"][p.name]) for p in search_space(method))
+    assert record["params"] == max(record["trials"], key=lambda t: t["objective"])["params"]
+    assert record["suite"]["name"] == "dev-v2" and record["overrides"] is None
+    assert list(record["chosen"]["tracks"]) == ["cooperative", "robust-ranging"]
+
+
+def test_every_shipped_record_has_the_same_budget():
+    from swarmloc.bench.tuning import BUDGET_SEED, BUDGET_TRIALS
+
+    budgets = {m: json.loads(record_path(m).read_text())["budget"] for m in TUNABLE}
+    assert all(b["trials"] == BUDGET_TRIALS and b["seed"] == BUDGET_SEED for b in budgets.values()), budgets
+    assert all(len(json.loads(record_path(m).read_text())["trials"]) == BUDGET_TRIALS for m in TUNABLE)
+
+
+def test_the_docs_tables_match_the_shipped_records():
+    from swarmloc.cli import main
+
+    assert main(["docs", "tuning", "--check"]) == 0, "run: swarmloc docs tuning"
+
+
+def test_a_tuned_value_at_an_end_of_its_range_is_marked():
+    from swarmloc.bench.tuning.table import _tuned
+
+    k, confidence = Param("k", 0.5, 4.0, "log"), Param("confidence", 0.8, 0.9999, "log-tail")
+    assert (k.position(0.5), k.position(4.0), k.position(np.sqrt(2.0))) == pytest.approx((0.0, 1.0, 0.5))
+    assert (confidence.position(0.8), confidence.position(0.9999)) == pytest.approx((0.0, 1.0))
+    assert (_tuned(k, 0.5001), _tuned(k, 3.99), _tuned(k, 1.3)) == ("0.5001 (low end)", "3.99 (high end)", "1.3")
+    assert _tuned(confidence, 0.8002) == "0.8002 (low end)"

@@ -18,12 +18,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from swarmloc.envs.tasks.channels import PEER, PEER_REL, ChannelLayout
-
 from swarmloc.agents.protocols import TrustInput
 from swarmloc.agents.trust.classical import ALPHA_MIN, Chi2SoftTrust
 from swarmloc.agents.trust.integrity import CusumTrust
 from swarmloc.agents.trust.search_space import Param
+from swarmloc.envs.tasks.channels import PEER, PEER_REL, ChannelLayout
 
 
 class CusumChi2Trust:

@@ -66,6 +66,12 @@ class Param:
         """The sampled variable of a constructor's ``value`` (the inverse of :meth:`from_search`)."""
         return 1.0 - value if self.scale == "log-tail" else float(value)
 
+    def position(self, value: float) -> float:
+        """Where ``value`` lies in the range on the sampled scale: 0 at ``low``, 1 at ``high``."""
+        lo, hi, x = (math.log(v) if self.log else v for v in (*self.search_bounds, self.to_search(value)))
+        where = (x - lo) / (hi - lo)
+        return 1.0 - where if self.scale == "log-tail" else where  # 1 − value runs the other way
+
     def contains(self, value: float) -> bool:
         """Whether ``value`` lies in [low, high]."""
         return self.low <= value <= self.high
