@@ -7,8 +7,8 @@ import pytest
 
 from swarmloc.bench.evaluation.results import load_results
 from swarmloc.bench.evaluation.suites import get_suite
-from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, shipped_results
-from swarmloc.leaderboard.store.shipped import WITHOUT_V1_RESULTS, load_shipped
+from swarmloc.bench.evaluation.shipped import RESULTS_DIRS, RUN_SEPARATOR, shipped_results
+from swarmloc.leaderboard.store.shipped import WITHOUT_RESULTS, load_shipped
 from swarmloc.leaderboard.store.database import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 
 FILES = shipped_results()
@@ -30,11 +30,12 @@ def test_shipped_file_matches_the_current_suite(path):
     assert {(e.task, e.seed) for e in results.episodes} == set(suite.episodes)
 
 
-def test_every_shipped_method_has_standard_v1_results_or_a_stated_reason():
-    on_v1 = {p.stem for p in shipped_results(RESULTS_DIRS["standard-v1"])}
+@pytest.mark.parametrize("suite", sorted(WITHOUT_RESULTS))
+def test_every_shipped_method_has_results_or_a_stated_reason(suite):
+    shipped = {p.stem for p in shipped_results(RESULTS_DIRS[suite]) if RUN_SEPARATOR not in p.stem}
     methods = {m for m in SHIPPED_REFERENCE_METHODS if not m.endswith("+smooth")}
-    assert on_v1 == methods - set(WITHOUT_V1_RESULTS)
-    assert set(WITHOUT_V1_RESULTS) <= methods
+    assert shipped == methods - set(WITHOUT_RESULTS[suite])
+    assert set(WITHOUT_RESULTS[suite]) <= methods
 
 
 def test_both_suites_are_shipped():

@@ -114,7 +114,8 @@ Use portable DDL (``sqlalchemy`` constructs or ANSI SQL) so PostgreSQL stores up
 
 _SHIPPED_TRACK_A: tuple[str, ...] = (
     "uniform", "fixed", "huber", "chi2-gate", "chi2-soft", "federated-coef", "cusum", "raim", "non-cooperative",
-    "random", "oracle",
+    "random", "oracle", "cusum-chi2",
+    "huber-tuned", "chi2-gate-tuned", "chi2-soft-tuned", "cusum-tuned", "raim-tuned", "cusum-chi2-tuned",
     "mappo", "mappo-no-smoothing", "mappo-no-isolation", "mappo-accuracy-only", "mappo-set-gru", "supervised-trust",
 )
 _SHIPPED_TRACK_B: tuple[str, ...] = (

@@ -26,19 +26,28 @@ from swarmloc.leaderboard.errors import DuplicateSubmission
 from swarmloc.leaderboard.store.database import SHIPPED_REFERENCE_METHODS, LeaderboardStore
 from swarmloc.leaderboard.submit.pipeline import submit
 
-#: shipped reference methods without standard-v1 results, and why (every other one has them)
-WITHOUT_V1_RESULTS: dict[str, str] = {
-    "ci-ekf": "anchor-free (dtvirm): every standard-v1 task has absolute references, so it runs none of them "
-              "(it runs AnchorFree-v0)",
-    "ci-ekf-no-aa": "as ci-ekf",
-    "centralized-oracle": "the benchmark v2 reference (docs/methods.md): its results ship with the v2 suite, "
-                          "not on the frozen standard-v1",
-    "isam2-robust": "new with benchmark v2 (docs/methods.md): its results ship with the v2 suite, not on the frozen "
-                    "standard-v1",
-    "supervised-trust": "new with benchmark v2, trained on the v2 training families (docs/learned.md): its results ship "
-                        "with the v2 suite, not on the frozen standard-v1",
+#: why a shipped reference method has no results file of a suite (every other one has one)
+WITHOUT_RESULTS: dict[str, dict[str, str]] = {
+    "standard-v1": {
+        "ci-ekf": "anchor-free (dtvirm): every standard-v1 task has absolute references, so it runs none of them "
+                  "(it runs AnchorFree-v0)",
+        "ci-ekf-no-aa": "as ci-ekf",
+        "centralized-oracle": "the benchmark v2 reference (docs/methods.md): its results ship with the v2 suite, "
+                              "not on the frozen standard-v1",
+        "isam2-robust": "new with benchmark v2 (docs/methods.md): its results ship with the v2 suite, not on the "
+                        "frozen standard-v1",
+        "supervised-trust": "new with benchmark v2, trained on the v2 training families (docs/learned.md): its results "
+                            "ship with the v2 suite, not on the frozen standard-v1",
+        **{name: "new with benchmark v2 (docs/tuning.md: tuned on dev-v2): its results ship with the v2 suite, not on "
+                 "the frozen standard-v1"
+           for name in ("cusum-chi2", "huber-tuned", "chi2-gate-tuned", "chi2-soft-tuned", "cusum-tuned", "raim-tuned",
+                        "cusum-chi2-tuned")},
+    },
+    "standard-v2": {
+        "ci-ekf": "anchor-free (dtvirm): every standard-v2 task has absolute references, so it runs none of them",
+        "ci-ekf-no-aa": "as ci-ekf",
+    },
 }
-
 
 @dataclass(frozen=True)
 class ShippedLoad:
