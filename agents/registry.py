@@ -112,7 +112,7 @@ REGISTRY: dict[str, MethodEntry] = {e.name: e for e in (
     MethodEntry("pf-nn", f"{_P}:make_pfnn", "B",
                 "adaptive PF + 6–12–1 weight-correcting network, trained offline (pf-nn §3.4)"),
     MethodEntry("isam2-robust", "swarmloc.agents.estimators.isam2:isam2_robust", "B",
-                "fixed-lag (2 s) iSAM2 smoother over the swarm, Huber factors (gtsam; 'factorgraph' extra)"),
+                "fixed-lag (2 s) iSAM2 smoother over the swarm (≤ 6 UAVs), Huber factors (gtsam; 'factorgraph' extra)"),
     MethodEntry("mappo", f"{_M}:mappo", "A",
                 "MAPPO link trust (shipped weights of the task's benchmark version) + Markov smoothing",
                 privileged_training=True),

@@ -141,3 +141,16 @@ def test_wrong_prior_shape_is_refused():
     facts = _static_facts(3)
     with pytest.raises(ValueError, match="x0 must have shape"):
         ISAM2Robust().reset(facts, np.zeros((1, 2, 6)))
+
+
+def test_the_registered_smoother_refuses_swarms_above_its_limit():
+    from swarmloc.agents.estimators.isam2 import MAX_UAVS
+    from swarmloc.agents.protocols import UnsupportedTask
+
+    method = load_method("isam2-robust").method
+    big, _, _ = _record(get_spec("swarmloc/Scale8-v2", duration=2 * DT), DEV[:1])
+    with pytest.raises(UnsupportedTask, match=f"8 UAVs: isam2-robust runs swarms of at most {MAX_UAVS}"):
+        method.reset(big, big.x0)
+    small, _, _ = _record(get_spec("swarmloc/Scale8-v2", n_uav=MAX_UAVS, duration=2 * DT), DEV[:1])
+    method.reset(small, small.x0)  # at the limit: runs
+    ISAM2Robust().reset(big, big.x0)  # the estimator itself has no limit

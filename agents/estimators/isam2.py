@@ -66,7 +66,7 @@ import numpy as np
 
 from swarmloc.envs.tasks.channels import ANCHOR, GPS, LANDMARK, PEER, PEER_REL, TDOA, tdoa_pair
 
-from swarmloc.agents.protocols import EstimatorOutput, Measurements, TaskFacts
+from swarmloc.agents.protocols import EstimatorOutput, Measurements, TaskFacts, UnsupportedTask
 
 #: a range shorter than this has no direction: the channel is skipped (as the CEKF does)
 _MIN_RANGE = 1e-9
@@ -84,6 +84,8 @@ class ISAM2Config:
         threshold: the kernel's threshold k in units of σ; None: ``KERNEL_THRESHOLD[kernel]``.
         relinearize_threshold: iSAM2 relinearises a variable whose update exceeds this (in its tangent space).
         covariance: report each UAV's marginal position covariance (costs a Bayes-tree marginal per UAV).
+        max_uavs: the largest swarm it runs; a task with more UAVs is refused (``UnsupportedTask``), see
+            ``MAX_UAVS``. None: any.
     """
 
     lag: float = 2.0
@@ -91,6 +93,7 @@ class ISAM2Config:
     threshold: float | None = None
     relinearize_threshold: float = 0.01
     covariance: bool = True
+    max_uavs: int | None = None
 
     @property
     def k(self) -> float:
@@ -274,7 +277,14 @@ class ISAM2Robust:
         self._facts: TaskFacts | None = None
 
     def reset(self, facts: TaskFacts, x0: np.ndarray) -> None:
-        """Start B episodes at the prior ``x0`` ``(B, N, 6)`` with the task's initial std."""
+        """Start B episodes at the prior ``x0`` ``(B, N, 6)`` with the task's initial std.
+
+        Raises:
+            UnsupportedTask: the swarm has more than ``config.max_uavs`` UAVs.
+        """
+        if self.config.max_uavs is not None and facts.n_uav > self.config.max_uavs:
+            raise UnsupportedTask(f"{facts.n_uav} UAVs: isam2-robust runs swarms of at most {self.config.max_uavs} "
+                                  f"(a swarm of fully connected peers re-solves a dense graph each step; see MAX_UAVS)")
         if np.shape(x0) != (facts.batch_size, facts.n_uav, 6):
             raise ValueError(f"x0 must have shape (B, N, 6) = {(facts.batch_size, facts.n_uav, 6)}, "
                              f"got {np.shape(x0)}")
@@ -304,6 +314,17 @@ class ISAM2Robust:
         return EstimatorOutput(positions=pos, cov=cov)
 
 
+#: the largest swarm the registered ``isam2-robust`` runs. Every UAV of a Scale task ranges to
+#: every other, so the smoother's window couples all N positions at every step and each update
+#: re-factorises a dense block of the whole swarm, through Python-side factors: measured on the
+#: 2-core machine beside two training runs, 5 s of flight cost 22 s at N = 8, 44 s at N = 16 and
+#: 442 s at N = 32 (Scale*-v2), i.e. about 3 min, 6 min and 1 h per 40 s episode, 40 hours for
+#: standard-v2's Scale family; 6 admits GradualFault (6 UAVs, followers ranging to leaders only:
+#: 0.1 s per 5 s) and every one-UAV task. A faster graph (keyframes, linear motion factors in C++)
+#: would lift it; ``ISAM2Robust(ISAM2Config())`` runs any N.
+MAX_UAVS = 6
+
+
 def isam2_robust() -> ISAM2Robust:
-    """Registry factory: ``isam2-robust``."""
-    return ISAM2Robust()
+    """Registry factory: ``isam2-robust`` (swarms of at most ``MAX_UAVS``)."""
+    return ISAM2Robust(ISAM2Config(max_uavs=MAX_UAVS))
