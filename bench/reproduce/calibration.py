@@ -366,7 +366,7 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         results_dir: the shipped results (default: the standard-v1 ones, ``bench/results/standard-v1``).
         progress: show the runner's progress bar.
     """
-    from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE, RESULTS_DIRS
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
     short = [t for t in tasks if len(seeds[t]) < 2]
     if short:
@@ -386,7 +386,7 @@ def calibrate(tasks: Sequence[str], seeds: Mapping[str, Sequence[int]], *, worke
         for m, rows in ev.episodes.items():
             methods[m]["episodes"] += [{"task": t, "seed": s, "metrics": r} for s, r in zip(ev.seeds, rows)]
     shipped: dict[str, Any] = {}
-    folder = Path(results_dir) if results_dir is not None else RESULTS_DIRS[DEFAULT_SUITE]
+    folder = Path(results_dir) if results_dir is not None else RESULTS_DIRS["standard-v1"]
     if not overrides:
         reference = {(t, s): r for t, ev in evidence.items() for s, r in zip(ev.seeds, ev.episodes["uniform"])}
         shipped = shipped_episodes(folder, tasks, seeds, reference, skip=list(methods))
