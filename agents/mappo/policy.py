@@ -311,7 +311,7 @@ def weights_metadata(weights: str | Path) -> dict:
 SHIPPED: dict[str, dict[int, str]] = {
     "mappo": {0: "mappo.pt", 1: "mappo_v1.pt", 2: "mappo_v2.seed2.pt"},
     "mappo-accuracy-only": {0: "mappo_accuracy_only.pt", 1: "mappo_accuracy_only_v1.pt"},
-    "mappo-set-gru": {0: "mappo_set_gru.pt"},
+    "mappo-set-gru": {0: "mappo_set_gru.pt", 2: "mappo_set_gru_v2.seed3.pt"},
 }
 
 
