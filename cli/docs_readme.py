@@ -98,5 +98,7 @@ def run(opts: Options) -> int:
     from swarmloc.bench.common.files import write_text_atomic
 
     write_text_atomic(opts.readme, updated)
-    print(f"{opts.readme}: leaderboard rewritten from the shipped standard-v1 results")
+    from swarmloc.bench.evaluation.shipped import DEFAULT_SUITE
+
+    print(f"{opts.readme}: leaderboard rewritten from the shipped {DEFAULT_SUITE} results")
     return 0

@@ -297,8 +297,8 @@ class Shipped:
 
     methods: tuple[str, ...] = ()
     """Methods, or training runs ``<method>.seed<k>``, to re-evaluate (default: every shipped file of the suite)."""
-    suite: str = "standard-v1"
-    """standard-v1, standard-v2 or standard-v0."""
+    suite: str = "standard-v2"
+    """standard-v2 (the default board), standard-v1 or standard-v0."""
     workers: int = 2
     """Worker processes."""
     bounds_only: bool = False

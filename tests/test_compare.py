@@ -132,15 +132,18 @@ def test_the_command_refuses_bad_input_with_status_2(tmp_path, problem):
 
 def test_shipped_names_the_shipped_results_of_the_other_files_suite(tmp_path):
     """``shipped:<method>`` reads the packaged results of a reference method on the other side's suite
-    (standard-v1 when both are shipped), so the README's comparison works from an installed wheel too."""
+    (the default board's, standard-v2, when both are shipped), so the README's comparison works from an installed
+    wheel too."""
     from swarmloc.bench.evaluation.results import load_results
     from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
 
     console = Console(record=True, width=300)
-    assert cli.run(cli.Options(a="shipped:uniform", b="shipped:cusum"), console) == 0
+    assert cli.run(cli.Options(a="shipped:uniform", b="shipped:oracle"), console) == 0
     text = console.export_text()
-    assert "A: uniform (shipped:uniform)" in text and "B: cusum (shipped:cusum)" in text
-    assert "B against A on standard-v1" in text and "verdict: B is ahead beyond doubt" in text
+    assert "A: uniform (shipped:uniform)" in text and "B: oracle (shipped:oracle)" in text
+    for track in ("cooperative", "robust-ranging"):
+        assert f"B against A on standard-v2, {track} track" in text
+        assert f"verdict ({track} track): B is ahead beyond doubt" in text
     mine = tmp_path / "mine.json"
     mine.write_text((RESULTS_DIRS["standard-v0"] / "chi2-soft.json").read_text())
     a, b = cli._load_pair("shipped:uniform", str(mine))

@@ -1,12 +1,13 @@
 """The shipped reference results: one results file per shipped method and suite.
 
-``bench/results/standard-v1/<method>.json`` are the results of the shipped methods on
-``standard-v1``, the default board; ``bench/results/standard-v2/<method>.json`` those on
-benchmark v2's ``standard-v2``; ``bench/results/standard-v0/<method>.json`` those of the
-frozen ``standard-v0``. Each is what ``swarmloc evaluate --method <method> --suite <suite>``
-writes; ``swarmloc reproduce shipped`` regenerates them. They travel in the wheel as package
-data. The leaderboard stores them (``swarmloc.leaderboard.store.shipped``); the calibration
-and label reports compare against them.
+``bench/results/standard-v2/<method>.json`` are the results of the shipped methods on benchmark
+v2's ``standard-v2``, the default board (a learned method's training runs beside them as
+``<method>.seed<k>.json``); ``bench/results/standard-v1/<method>.json`` those on the frozen,
+deprecated ``standard-v1``; ``bench/results/standard-v0/<method>.json`` those of the frozen
+``standard-v0``. Each is what ``swarmloc evaluate --method <method> --suite <suite>`` writes (a
+run: ``--weights`` its weights); ``swarmloc reproduce shipped`` regenerates them. They travel in
+the wheel as package data. The leaderboard stores them (``swarmloc.leaderboard.store.shipped``);
+the calibration and label reports compare against them.
 """
 
 from __future__ import annotations
@@ -17,12 +18,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 #: the suite of the default board
-DEFAULT_SUITE = "standard-v1"
+DEFAULT_SUITE = "standard-v2"
 #: a learned method's training runs ship as ``<method>.seed<k>.json`` beside ``<method>.json``
 RUN_SEPARATOR = ".seed"
 #: the shipped results of each suite, default board first
 RESULTS_DIRS: dict[str, Path] = {
-    suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v2", "standard-v0")
+    suite: Path(__file__).resolve().parents[1] / "results" / suite for suite in (DEFAULT_SUITE, "standard-v1", "standard-v0")
 }
 
 

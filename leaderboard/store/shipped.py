@@ -46,6 +46,9 @@ WITHOUT_RESULTS: dict[str, dict[str, str]] = {
     "standard-v2": {
         "ci-ekf": "anchor-free (dtvirm): every standard-v2 task has absolute references, so it runs none of them",
         "ci-ekf-no-aa": "as ci-ekf",
+        "federated": "needs a GNSS fix on every UAV: no standard-v2 task gives one to every UAV (GradualFault's "
+                     "followers have none), so it runs none of them",
+        "federated-fdi": "as federated",
     },
 }
 
