@@ -5,12 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-from swarmloc.cli.leaderboard_store import StoreOptions
+from swarmloc.cli.leaderboard_store import StoreOptions, store_shipped
 
 if TYPE_CHECKING:
     from rich.console import Console
-
-    from swarmloc.leaderboard.store.database import LeaderboardStore
 
 
 @dataclass
@@ -39,7 +37,7 @@ def run(opts: Options, console: Console | None = None) -> int:
     with open_store_or_refuse(opts.db_url, console) as store:
         if store is None:
             return 1
-        if opts.shipped and not _store_shipped(store, opts.suite, console or Console()):
+        if opts.shipped and not store_shipped(store, opts.suite, console or Console()):
             return 2
         try:
             print_leaderboard(store, opts.suite, console, family=opts.family, tasks=opts.tasks, view=opts.view)
@@ -47,20 +45,3 @@ def run(opts: Options, console: Console | None = None) -> int:
             (console or Console()).print(Text(f"error: {err}", style="bold red"))
             return 2
     return 0
-
-
-def _store_shipped(store: LeaderboardStore, suite: str | None, console: Console) -> bool:
-    """Store the shipped results that ``store`` lacks (of ``suite``, else of every suite); False for an unknown suite."""
-    from rich.text import Text
-
-    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
-    from swarmloc.leaderboard.store.shipped import load_shipped
-
-    if suite is not None and suite not in RESULTS_DIRS:
-        console.print(Text(f"error: no shipped results of suite {suite!r}; shipped: {', '.join(RESULTS_DIRS)}",
-                           style="bold red"))
-        return False
-    loaded = load_shipped(store, RESULTS_DIRS[suite] if suite is not None else None)
-    for name, why in loaded.refused:
-        console.print(Text(f"not stored {name}: {why}", style="yellow"))
-    return True

@@ -14,6 +14,8 @@ if TYPE_CHECKING:
 
     from rich.console import Console
 
+    from swarmloc.leaderboard.store.database import LeaderboardStore
+
 
 @dataclass(kw_only=True)
 class StoreOptions:
@@ -31,3 +33,20 @@ def print_wrote(path: Path, console: Console | None = None) -> None:
     from rich.text import Text
 
     (console or Console()).print(Text(f"wrote {path}"))
+
+
+def store_shipped(store: LeaderboardStore, suite: str | None, console: Console) -> bool:
+    """Store the shipped results that ``store`` lacks (of ``suite``, else of every suite); False for an unknown suite."""
+    from rich.text import Text
+
+    from swarmloc.bench.evaluation.shipped import RESULTS_DIRS
+    from swarmloc.leaderboard.store.shipped import load_shipped
+
+    if suite is not None and suite not in RESULTS_DIRS:
+        console.print(Text(f"error: no shipped results of suite {suite!r}; shipped: {', '.join(RESULTS_DIRS)}",
+                           style="bold red"))
+        return False
+    loaded = load_shipped(store, RESULTS_DIRS[suite] if suite is not None else None)
+    for name, why in loaded.refused:
+        console.print(Text(f"not stored {name}: {why}", style="yellow"))
+    return True

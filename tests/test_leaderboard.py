@@ -549,7 +549,7 @@ def test_cli_commands(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture
     assert "seed method" in console.export_text()
     assert leaderboard_html.run(leaderboard_html.Options(out=tmp_path / "site", db_url=db_url), console) == 0
     assert (tmp_path / "site" / "index.html").is_file()
-    assert leaderboard_export.run(leaderboard_export.Options(format="json", db_url=db_url), console) == 0
+    assert leaderboard_export.run(leaderboard_export.Options(format="json", db_url=db_url, shipped=False), console) == 0
     assert json.loads(capsys.readouterr().out)[0]["name"] == "seed method"
     refused = submit_command.run(submit_command.Options(results=tmp_path / "missing.json", entry_point="pkg.mod:make",
                                                         name="x", track="A", db_url=db_url), console)
@@ -591,3 +591,16 @@ def test_a_forged_score_block_is_refused(tmp_path: Path) -> None:
     path = H.make_results_file(tmp_path / "f.json", metrics_edit=with_uniform, edit=forge)
     with pytest.raises(InvalidSubmission, match=r"score\.S is .*, but the episodes give 1\.0"):
         validate_submission(make_submission(path, "lb_fake_runner:good", META), H.suite_lookup)
+
+
+def test_export_of_a_fresh_store_is_the_shipped_board(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``leaderboard export`` stores the shipped results a store lacks first: a fresh store exports the reference
+    board of the suite, runs and privileged training included; a suite without shipped results exports as stored."""
+    url = f"sqlite:///{tmp_path / 'lb.db'}"
+    assert leaderboard_export.run(leaderboard_export.Options(format="json", db_url=url, suite="standard-v2")) == 0
+    rows = json.loads(capsys.readouterr().out)
+    by_name = {row["name"]: row for row in rows}
+    assert by_name["mappo-set-gru"]["runs"] == 3 and by_name["mappo-set-gru"]["privileged_training"] is True
+    assert by_name["cusum"]["privileged_training"] is False and by_name["cusum"]["runs"] == 1
+    assert leaderboard_export.run(leaderboard_export.Options(format="json", db_url=url, suite="quick-v2")) == 0
+    assert json.loads(capsys.readouterr().out) == []
