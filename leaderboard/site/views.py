@@ -220,7 +220,7 @@ COOPERATIVE_TRACK = "cooperative"
 
 
 def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: str | None = None,
-                 tasks: str | Sequence[str] | None = None) -> list[Table | Text]:
+                 tasks: str | Sequence[str] | None = None, top: int | None = None) -> list[Table | Text]:
     """The terminal view of a benchmark v2 suite: per track (headline first) its own ranked, partial-coverage and
     privileged tables, each with its own S, CI and ranks (and the cooperation gain on the cooperative track); one
     legend.
@@ -230,6 +230,8 @@ def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: st
         per_track: track → its board (:func:`~swarmloc.leaderboard.site.ranking.track_boards`).
         family, tasks: per-task columns of one family or of these tasks; a track holding none of them
             shows its family columns.
+        top: only the first ``top`` ranked methods of each track, without the partial-coverage and
+            privileged tables (the README's summary); None: every table whole.
 
     Raises:
         ValueError: an unknown family or task, or more than ``MAX_TASK_COLUMNS`` tasks.
@@ -247,9 +249,15 @@ def track_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard], family: st
         out.append(Text(f"swarmloc leaderboard — suite {where} (ranked by 2^S; covering all {n} tasks of the track)",
                         style="bold"))
         if tb.ranked:
-            out.append(_rich_table(tb.ranked, columns, n, ranked=True, coverage=False, cooperation=cooperation))
+            ranked = tb.ranked if top is None else tb.ranked[:top]
+            out.append(_rich_table(ranked, columns, n, ranked=True, coverage=False, cooperation=cooperation))
+            if len(ranked) < len(tb.ranked):
+                out.append(Text(f"… and {len(tb.ranked) - len(ranked)} more ranked methods, the partial-coverage and "
+                                f"privileged tables: swarmloc leaderboard show --shipped", style="italic"))
         else:
             out.append(Text("No ranked methods: none has a score on every task of the track.", style="italic"))
+        if top is not None:
+            continue
         if tb.partial:
             out += [Text(f"Partial coverage on {where} (ranked apart; 2^S over the covered tasks only)", style="bold"),
                     _rich_table(tb.partial, columns, n, ranked=True, cooperation=cooperation)]
@@ -331,7 +339,8 @@ def compute_tables(board: SuiteBoard, per_track: dict[str, SuiteBoard]) -> list[
 
 
 def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family: str | None = None,
-                       tasks: str | Sequence[str] | None = None, view: View = "accuracy") -> list[Table | Text]:
+                       tasks: str | Sequence[str] | None = None, view: View = "accuracy",
+                       top: int | None = None) -> list[Table | Text]:
     """Rich renderables: per suite, the tables of :func:`board_tables`, or of :func:`compute_tables`.
 
     Args:
@@ -339,6 +348,7 @@ def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family
         suite: Only this suite name (all suites when None).
         family, tasks: per-task columns of one family or of these tasks (default: per family; accuracy view).
         view: ``"accuracy"`` (the ranking) or ``"compute"`` (delay per update and FLOPs, same order).
+        top: a v2 suite's accuracy view shows only each track's first ``top`` ranked methods (:func:`track_tables`).
 
     Returns:
         The tables and legends, in display order (empty when the store has no entries); a benchmark v2
@@ -356,17 +366,18 @@ def leaderboard_tables(store: LeaderboardStore, suite: str | None = None, family
         if view == "compute":
             parts += compute_tables(board, per_track)
         else:
-            parts += track_tables(board, per_track, family, tasks) if per_track else board_tables(board, family, tasks)
+            parts += (track_tables(board, per_track, family, tasks, top) if per_track
+                      else board_tables(board, family, tasks))
     return parts
 
 
 def print_leaderboard(store: LeaderboardStore, suite: str | None = None, console: Console | None = None,
                       family: str | None = None, tasks: str | Sequence[str] | None = None,
-                      view: View = "accuracy") -> None:
+                      view: View = "accuracy", top: int | None = None) -> None:
     """Print the terminal leaderboard (see :func:`leaderboard_tables`)."""
     # Piped output has no terminal width to fit: use the width the table is laid out for.
     out = console or (Console() if sys.stdout.isatty() else Console(width=TERMINAL_WIDTH))
-    parts = leaderboard_tables(store, suite, family, tasks, view)
+    parts = leaderboard_tables(store, suite, family, tasks, view, top)
     if not parts:
         out.print(Text(f"The leaderboard at {store.url} is empty."))
     for part in parts:
