@@ -93,10 +93,10 @@ def regenerate(methods: Sequence[str], suite_name: str = DEFAULT_SUITE, workers:
             raise FileNotFoundError(f"training run {stem!r} has no shipped file {file}; write it with "
                                     f"swarmloc evaluate --weights <its weights>")
         sha = read_results_file(file).results.method.weights_sha256
-        weights = shipped_weights(sha) if sha else None
-        if weights is None:
+        weights_file = shipped_weights(sha) if sha else None
+        if weights_file is None:
             raise FileNotFoundError(f"the weights of {file.name} (sha256 {sha}) are not among the shipped weights")
-        evaluations.append([(stem, stem.split(RUN_SEPARATOR)[0], weights)])
+        evaluations.append([(stem, stem.split(RUN_SEPARATOR)[0], weights_file)])
     outputs = []
     for evaluation in evaluations:
         weights = {method: str(path) for _, method, path in evaluation if path is not None}
