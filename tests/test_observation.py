@@ -1,13 +1,16 @@
-"""The Track A observation: the one-pass kernel against its definition in NumPy, bit for bit."""
+"""The Track A observation and the critics' global state: the one-pass kernels (on the calling thread and
+threaded) against their definitions in NumPy, bit for bit."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from swarmloc.envs.tasks.channels import N_KINDS
 from swarmloc.envs.world import observation as O
+from swarmloc.envs.world.sim_kernel import SERIAL_BELOW
 
 
 def _reference(step, one_hot):
@@ -26,12 +29,17 @@ def _reference(step, one_hot):
     return out
 
 
-def test_the_kernel_is_the_definition_bit_for_bit():
-    rng = np.random.default_rng(0)
-    shape = (7, 5, 9)
-    step = SimpleNamespace(resid=rng.exponential(2.0, shape), pred=rng.uniform(0.0, 40.0, shape),
+def _step(rng, shape):
+    return SimpleNamespace(resid=rng.exponential(2.0, shape), pred=rng.uniform(0.0, 40.0, shape),
                            applied=rng.uniform(0.0, 1.0, shape), jerk=rng.exponential(1.0, shape[:2]),
                            nis=rng.exponential(5.0, shape), valid=rng.uniform(size=shape) < 0.7)
+
+
+@pytest.mark.parametrize("n_b", [7, SERIAL_BELOW + 9])  # on the calling thread, and threaded over blocks
+def test_the_kernel_is_the_definition_bit_for_bit(n_b):
+    rng = np.random.default_rng(0)
+    shape = (n_b, 5, 9)
+    step = _step(rng, shape)
     one_hot = O.kind_one_hot(rng.integers(0, 6, size=shape[1:]))
     got = O.build_observation(step, one_hot)
     want = _reference(step, one_hot)
@@ -39,3 +47,22 @@ def test_the_kernel_is_the_definition_bit_for_bit():
     assert ((got >= 0.0) & (got <= 1.0)).all()
     out = np.full_like(got, np.nan)
     assert O.build_observation(step, one_hot, out=out) is out and np.array_equal(out, want)
+
+
+def _state_reference(obs, x, P):
+    """``TrustEnvBatch.state``'s layout in NumPy: the observation flattened, prior positions, velocities, √tr(P_pp)."""
+    n_b, n = x.shape[:2]
+    return np.concatenate([obs.reshape(n_b, -1), x[:, :, :3].reshape(n_b, -1), x[:, :, 3:].reshape(n_b, -1),
+                           np.sqrt(P[:, :, 0, 0] + P[:, :, 1, 1] + P[:, :, 2, 2])], axis=1).astype(np.float32)
+
+
+@pytest.mark.parametrize("n_b", [3, SERIAL_BELOW + 5])
+def test_the_state_kernel_is_its_layout_bit_for_bit(n_b):
+    rng = np.random.default_rng(1)
+    obs = rng.uniform(size=(n_b, 4, 6, O.N_FEATURES)).astype(np.float32)
+    x = rng.normal(size=(n_b, 4, 6)) * 10.0
+    A = rng.normal(size=(n_b, 4, 6, 6))
+    P = A @ np.swapaxes(A, -1, -2)
+    out = np.full((n_b, obs[0].size + 7 * 4), np.nan, dtype=np.float32)
+    assert O.build_state(obs, x, P, out) is out
+    assert np.array_equal(out.view(np.uint32), _state_reference(obs, x, P).view(np.uint32))

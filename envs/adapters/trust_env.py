@@ -22,7 +22,7 @@ from gymnasium.utils import seeding
 
 from swarmloc.envs.world.core import CoreStep, LinkTrustCore
 from swarmloc.envs.world.cost import DEFAULT_PROFILE, ProcessorProfile
-from swarmloc.envs.world.observation import N_FEATURES, build_observation, kind_one_hot
+from swarmloc.envs.world.observation import N_FEATURES, build_observation, build_state, kind_one_hot
 from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward, team_reward
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.tasks.seeds import SEED_BOUND
@@ -272,9 +272,9 @@ class TrustEnvBatch:
             policy, per UAV plus per present channel).
         """
         o = self.core.step(trust)
-        policy_flops = self.policy_flops + self.policy_flops_per_channel * o.update_valid.sum(axis=-1)
         terms = standard_reward(o.estimate, o.truth, o.applied, o.prev_trust, o.update_valid,
-                                self.spec.filter.alpha_th, o.flops, policy_flops, self.reward_weights, self.processor)
+                                self.spec.filter.alpha_th, o.flops, self.policy_flops, self.reward_weights, self.processor,
+                                self.policy_flops_per_channel)
         self._last = o
         return o, terms
 
@@ -316,15 +316,7 @@ class TrustEnvBatch:
         step, then every UAV's prior position std √tr(P_pp) (N) [m]. No truth and no fault
         labels: everything here is known to the swarm's filters.
         """
-        n_b, n = self.batch_size, self.n_uav
-        x, P = self.core.x, self.core.P
-        out = np.empty((n_b, self.state_size), dtype=np.float32)
-        n_obs = obs[0].size
-        out[:, :n_obs] = obs.reshape(n_b, n_obs)
-        out[:, n_obs:n_obs + 3 * n] = x[:, :, :3].reshape(n_b, 3 * n)
-        out[:, n_obs + 3 * n:n_obs + 6 * n] = x[:, :, 3:].reshape(n_b, 3 * n)
-        out[:, n_obs + 6 * n:] = np.sqrt(P[:, :, 0, 0] + P[:, :, 1, 1] + P[:, :, 2, 2])
-        return out
+        return build_state(obs, self.core.x, self.core.P, np.empty((self.batch_size, self.state_size), dtype=np.float32))
 
     def team_reward(self, terms: RewardTerms) -> np.ndarray:
         """``(B,)`` team reward: the mean over UAVs of the standard reward."""

@@ -16,11 +16,14 @@ peer range and P_i⁻ + P_j⁻ + R0 I for a relative position (``TaskSpec.peer_n
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from swarmloc.envs.tasks.channels import N_KINDS, OBS_KIND_COLUMN
 from swarmloc.envs.world.core import CoreStep
+from swarmloc.envs.world.sim_kernel import BLOCK, SERIAL_BELOW, block_bounds
 
 FEATURE_NAMES = (
     "innovation", "predicted_distance", "previous_trust", "imu_jerk", "nis",
@@ -58,16 +61,25 @@ def build_observation(step: CoreStep, one_hot: np.ndarray, out: np.ndarray | Non
     n_b, n, n_l = step.resid.shape
     if out is None:
         out = np.empty((n_b, n, n_l, N_FEATURES), dtype=np.float32)
-    _fill(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out)
+    fill = _fill if n_b < SERIAL_BELOW else _fill_threaded
+    fill(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out)
     return out
 
 
-@njit(cache=True)
-def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out):
-    """``build_observation`` in one pass (float64 arithmetic, rounded to float32 once, as NumPy's
-    assignments round; absent measurements carry no innovation, distance or NIS)."""
-    n_b, n, n_l = resid.shape
-    for b in range(n_b):
+def build_state(obs: np.ndarray, x: np.ndarray, P: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The centralized critics' global state ``(B, S)`` float32 (``TrustEnvBatch.state`` states the layout):
+    ``obs`` ``(B, N, L, F)`` flattened, the prior positions and velocities of ``x`` ``(B, N, 6)``, then
+    √tr(P_pp) of ``P`` ``(B, N, 6, 6)``, written into ``out``."""
+    (_state if obs.shape[0] < SERIAL_BELOW else _state_threaded)(obs, x, P, out)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, lo, hi):
+    """``build_observation`` for episodes lo..hi−1 in one pass (float64 arithmetic, rounded to float32 once,
+    as NumPy's assignments round; absent measurements carry no innovation, distance or NIS)."""
+    n, n_l = resid.shape[1], resid.shape[2]
+    for b in range(lo, hi):
         for i in range(n):
             jk = jerk[b, i] / (jerk[b, i] + SCALE_JERK)
             for l in range(n_l):
@@ -81,3 +93,52 @@ def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out):
                 for k in range(N_KINDS):
                     o[KIND0 + k] = one_hot[i, l, k]
                 o[VALID] = v
+
+
+@njit(cache=True)
+def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out):
+    """``_fill_rows`` over the batch, on the calling thread."""
+    _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, 0, resid.shape[0])
+
+
+@njit(cache=True, parallel=True)
+def _fill_threaded(resid, pred, applied, jerk, nis, valid, one_hot, out):
+    """``_fill_rows`` with threads over blocks of ``BLOCK`` episodes."""
+    n_b = resid.shape[0]
+    for block in prange((n_b + BLOCK - 1) // BLOCK):
+        lo, hi = block_bounds(block, n_b)
+        _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, lo, hi)
+
+
+@njit(cache=True, inline="always")
+def _state_rows(obs, x, P, out, lo, hi):
+    """``build_state`` for episodes lo..hi−1."""
+    n, n_l, n_f = obs.shape[1], obs.shape[2], obs.shape[3]
+    at = n * n_l * n_f
+    for b in range(lo, hi):
+        k = 0
+        for i in range(n):
+            for l in range(n_l):
+                for f in range(n_f):
+                    out[b, k] = obs[b, i, l, f]
+                    k += 1
+        for i in range(n):
+            for d in range(3):
+                out[b, at + 3 * i + d] = x[b, i, d]
+                out[b, at + 3 * n + 3 * i + d] = x[b, i, 3 + d]
+            out[b, at + 6 * n + i] = math.sqrt(P[b, i, 0, 0] + P[b, i, 1, 1] + P[b, i, 2, 2])
+
+
+@njit(cache=True)
+def _state(obs, x, P, out):
+    """``_state_rows`` over the batch, on the calling thread."""
+    _state_rows(obs, x, P, out, 0, obs.shape[0])
+
+
+@njit(cache=True, parallel=True)
+def _state_threaded(obs, x, P, out):
+    """``_state_rows`` with threads over blocks of ``BLOCK`` episodes."""
+    n_b = obs.shape[0]
+    for block in prange((n_b + BLOCK - 1) // BLOCK):
+        lo, hi = block_bounds(block, n_b)
+        _state_rows(obs, x, P, out, lo, hi)
