@@ -11,6 +11,9 @@ Rows (``impl``), Scale6-v0 (6 UAVs, 13 channels each), uniform trust:
 * ``world-v2`` — ``LinkTrustCore.step`` on the v2 backbone: Scale6-v1 with its peers fused by
   split covariance intersection in the step kernel (``FilterSettings.peer_update = "split_ci"``).
   The world's draws are still v1's.
+* ``world-sense`` — ``World.sense`` alone on Scale6-v0 (truth, IMU, channels and faults, no filter): the
+  ceiling of every row above, whose draws it makes (mostly the Box–Muller normals, frozen with the
+  tasks that shipped results on them).
 
 Only steps are timed, not resets; each figure is the best of a few repeats (the machine
 may be shared). ``env_steps_per_s`` counts episodes × steps per second,
@@ -125,9 +128,23 @@ def time_steps(core: LinkTrustCore | UnfusedCore, batch: int, n_steps: int, repe
     return best
 
 
+def time_sensing(world: World, batch: int, n_steps: int, repeats: int) -> float:
+    """Best seconds over ``repeats`` for ``n_steps`` calls of ``world.sense`` from a fresh reset (not timed)."""
+    world.reset(np.arange(batch))
+    world.sense()  # compile / load the kernel
+    best = float("inf")
+    for _ in range(repeats):
+        world.reset(np.arange(batch))
+        t0 = time.perf_counter()
+        for _ in range(n_steps):
+            world.sense()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def measure_rows(quick: bool = False) -> list[dict]:
-    """The ``world``, ``world-unfused`` and ``world-v2`` rows at every batch size (``quick``: ``QUICK_BATCHES``,
-    short runs)."""
+    """The ``world``, ``world-unfused``, ``world-v2`` and ``world-sense`` rows at every batch size (``quick``:
+    ``QUICK_BATCHES``, short runs)."""
     spec, v2 = get_spec(TASK), get_spec(V2_TASK, **V2_OVERRIDES)
     rows = []
     for batch in QUICK_BATCHES if quick else BATCHES:
@@ -138,4 +155,7 @@ def measure_rows(quick: bool = False) -> list[dict]:
             sec = time_steps(make(task, batch), batch, n_steps, repeats)
             rows.append({"impl": impl, "B": batch, "env_steps_per_s": batch * n_steps / sec,
                          "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
+        sec = time_sensing(World(spec, batch), batch, n_steps, repeats)
+        rows.append({"impl": "world-sense", "B": batch, "env_steps_per_s": batch * n_steps / sec,
+                     "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
     return rows
