@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from swarmloc.envs.world.cost import DEFAULT_PROFILE
-from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardWeights, standard_reward
+from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardWeights
+from swarmloc.envs.world.reward_kernel import standard_reward
 from swarmloc.envs.world.sim_kernel import SERIAL_BELOW
 
 

@@ -19,7 +19,8 @@ from swarmloc.bench.evaluation.episode import EpisodeBatch, StepRecord
 from swarmloc.bench.evaluation.traces import Trace
 from swarmloc.bench.scoring import metrics as M
 from swarmloc.envs.tasks.specs import TaskSpec
-from swarmloc.envs.world.reward import RewardTerms, standard_reward, team_reward
+from swarmloc.envs.world.reward import RewardTerms, team_reward
+from swarmloc.envs.world.reward_kernel import standard_reward
 
 
 class EpisodeRecorder:

@@ -23,7 +23,8 @@ from gymnasium.utils import seeding
 from swarmloc.envs.world.core import CoreStep, LinkTrustCore
 from swarmloc.envs.world.cost import DEFAULT_PROFILE, ProcessorProfile
 from swarmloc.envs.world.observation import N_FEATURES, build_observation, build_state, kind_one_hot
-from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, standard_reward, team_reward
+from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, team_reward
+from swarmloc.envs.world.reward_kernel import standard_reward
 from swarmloc.envs.tasks.specs import TaskSpec
 from swarmloc.envs.tasks.seeds import SEED_BOUND
 from swarmloc.envs.tasks.catalogue import canonical_task_id, get_spec
