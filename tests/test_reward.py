@@ -62,3 +62,13 @@ def test_an_episode_gets_the_same_terms_in_any_batch():
         alone = standard_reward(*(a[b:b + 1] if isinstance(a, np.ndarray) else a for a in args))
         for name in ("reward", "accuracy", "delay_penalty", "jitter_penalty", "energy_j"):
             assert np.array_equal(getattr(alone, name)[0], getattr(batched, name)[b]), name
+
+
+def test_policy_flops_as_one_number_or_per_uav():
+    rng = np.random.default_rng(4)
+    shape = (1, 3, 6)
+    args = (rng.normal(size=(1, 3, 3)), rng.normal(size=(1, 3, 3)), rng.uniform(size=shape), rng.uniform(size=shape),
+            rng.uniform(size=shape) < 0.8, 0.1, np.full((1, 3), 1e5))
+    per_uav = np.array([[1e3, 2e6, 3e3]])
+    assert np.array_equal(standard_reward(*args, per_uav).flops, 1e5 + per_uav)
+    assert np.array_equal(standard_reward(*args, 7.0).flops, np.full((1, 3), 1e5 + 7.0))

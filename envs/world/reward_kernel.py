@@ -37,7 +37,9 @@ def standard_reward(estimate: np.ndarray, truth: np.ndarray, applied: np.ndarray
         ``RewardTerms`` with the reward and every term, ``(B, N)``.
     """
     n_b, n = estimate.shape[:2]
-    policy = np.broadcast_to(np.asarray(policy_flops, dtype=float), (n_b, n))
+    policy = np.asarray(policy_flops, dtype=float)
+    # one number for every UAV: a (1, 1) array the kernel reads for all (cheaper than a broadcast view at B = 1)
+    policy = policy.reshape(1, 1) if policy.ndim == 0 else np.broadcast_to(policy, (n_b, n))
     out = _reward_terms(estimate, truth, applied, previous, valid, float(alpha_th),
                         np.asarray(filter_flops, dtype=float), policy, float(policy_flops_per_channel),
                         2.0 * weights.sigma_acc**2, weights.t_max, profile.effective_flops, profile.power_w,
@@ -82,7 +84,9 @@ def _reward_rows(estimate, truth, applied, previous, valid, alpha_th, filter_flo
                         n_active += 1
                 row[l] = abs(applied[b, i, l] - previous[b, i, l]) * (1.0 if v else 0.0)
             denom = max(n_valid, 1)
-            flops = filter_flops[b, i] + (policy_flops[b, i] + per_channel * n_valid)
+            one = policy_flops.shape[0] == 1 and policy_flops.shape[1] == 1
+            policy = policy_flops[0, 0] if one else policy_flops[b, i]
+            flops = filter_flops[b, i] + (policy + per_channel * n_valid)
             t_calc = flops / flops_per_s
             # exp(x) − 1 ≤ 0 for x ≤ 0: no exp within the budget
             delay = max(0.0, math.exp((t_calc - t_max) / t_max) - 1.0) if t_calc > t_max else 0.0
