@@ -66,3 +66,17 @@ def test_the_state_kernel_is_its_layout_bit_for_bit(n_b):
     out = np.full((n_b, obs[0].size + 7 * 4), np.nan, dtype=np.float32)
     assert O.build_state(obs, x, P, out) is out
     assert np.array_equal(out.view(np.uint32), _state_reference(obs, x, P).view(np.uint32))
+
+
+@pytest.mark.parametrize("n_b", [4, SERIAL_BELOW + 2])
+def test_observation_and_state_in_one_pass_are_the_two_kernels(n_b):
+    rng = np.random.default_rng(2)
+    shape = (n_b, 3, 7)
+    step = _step(rng, shape)
+    one_hot = O.kind_one_hot(rng.integers(0, 6, size=shape[1:]))
+    x = rng.normal(size=(n_b, 3, 6))
+    A = rng.normal(size=(n_b, 3, 6, 6))
+    P = A @ np.swapaxes(A, -1, -2)
+    obs, state = O.build_observation_and_state(step, one_hot, x, P, 3 * 7 * O.N_FEATURES + 7 * 3)
+    assert np.array_equal(obs.view(np.uint32), _reference(step, one_hot).view(np.uint32))
+    assert np.array_equal(state.view(np.uint32), _state_reference(obs, x, P).view(np.uint32))

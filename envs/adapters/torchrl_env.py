@@ -109,7 +109,7 @@ class SwarmLocTorchRLEnv(EnvBase):
     def _output(self, info: dict[str, np.ndarray] | None, reward: np.ndarray | None, done: np.ndarray
                 ) -> TensorDictBase:
         n_b, n = self._batch.batch_size, self._batch.n_uav
-        obs = self._batch.observation()
+        obs, state = self._batch.observation_and_state()
         if info is None:
             info_arr = np.zeros((len(INFO_KEYS), n_b, n, 1), dtype=np.float32)
         else:
@@ -121,7 +121,7 @@ class SwarmLocTorchRLEnv(EnvBase):
             group["reward"] = self._tensor(reward.astype(np.float32)[..., None])
         done_t = self._tensor(done.reshape(n_b, 1))
         return TensorDict({GROUP: TensorDict(group, batch_size=(n_b, n)),
-                           "state": self._tensor(self._batch.state(obs)),
+                           "state": self._tensor(state),
                            "done": done_t, "truncated": done_t.clone(),
                            "terminated": torch.zeros((n_b, 1), dtype=torch.bool)},
                           batch_size=self.batch_size, device=self.device)

@@ -22,7 +22,8 @@ from gymnasium.utils import seeding
 
 from swarmloc.envs.world.core import CoreStep, LinkTrustCore
 from swarmloc.envs.world.cost import DEFAULT_PROFILE, ProcessorProfile
-from swarmloc.envs.world.observation import N_FEATURES, build_observation, build_state, kind_one_hot
+from swarmloc.envs.world.observation import (N_FEATURES, build_observation, build_observation_and_state,
+                                             build_state, kind_one_hot)
 from swarmloc.envs.world.reward import STANDARD_WEIGHTS, RewardTerms, RewardWeights, team_reward
 from swarmloc.envs.world.reward_kernel import standard_reward
 from swarmloc.envs.tasks.specs import TaskSpec
@@ -318,6 +319,10 @@ class TrustEnvBatch:
         labels: everything here is known to the swarm's filters.
         """
         return build_state(obs, self.core.x, self.core.P, np.empty((self.batch_size, self.state_size), dtype=np.float32))
+
+    def observation_and_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """``observation()`` and its ``state`` in one pass (new arrays)."""
+        return build_observation_and_state(self.last, self._one_hot, self.core.x, self.core.P, self.state_size)
 
     def team_reward(self, terms: RewardTerms) -> np.ndarray:
         """``(B,)`` team reward: the mean over UAVs of the standard reward."""

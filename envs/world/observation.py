@@ -61,9 +61,20 @@ def build_observation(step: CoreStep, one_hot: np.ndarray, out: np.ndarray | Non
     n_b, n, n_l = step.resid.shape
     if out is None:
         out = np.empty((n_b, n, n_l, N_FEATURES), dtype=np.float32)
-    fill = _fill if n_b < SERIAL_BELOW else _fill_threaded
-    fill(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out)
+    _fill_kernel(n_b)(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out,
+                      _NO_STATE, _NO_X, _NO_P)
     return out
+
+
+def build_observation_and_state(step: CoreStep, one_hot: np.ndarray, x: np.ndarray, P: np.ndarray,
+                                state_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The observation (``build_observation``) and the global state (``build_state``) in one pass: each
+    feature is written to both, so the state does not read the observation back."""
+    n_b, n, n_l = step.resid.shape
+    out = np.empty((n_b, n, n_l, N_FEATURES), dtype=np.float32)
+    state = np.empty((n_b, state_size), dtype=np.float32)
+    _fill_kernel(n_b)(step.resid, step.pred, step.applied, step.jerk, step.nis, step.valid, one_hot, out, state, x, P)
+    return out, state
 
 
 def build_state(obs: np.ndarray, x: np.ndarray, P: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -74,11 +85,21 @@ def build_state(obs: np.ndarray, x: np.ndarray, P: np.ndarray, out: np.ndarray) 
     return out
 
 
+#: stand-ins for the state arguments of ``_fill`` when no state is written
+_NO_STATE, _NO_X, _NO_P = np.empty((0, 0), dtype=np.float32), np.empty((0, 0, 6)), np.empty((0, 0, 6, 6))
+
+
+def _fill_kernel(n_b: int):
+    return _fill if n_b < SERIAL_BELOW else _fill_threaded
+
+
 @njit(cache=True, inline="always")
-def _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, lo, hi):
+def _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, state, x, P, lo, hi):
     """``build_observation`` for episodes lo..hi−1 in one pass (float64 arithmetic, rounded to float32 once,
-    as NumPy's assignments round; absent measurements carry no innovation, distance or NIS)."""
+    as NumPy's assignments round; absent measurements carry no innovation, distance or NIS); with a ``state``
+    of B rows, each feature goes to its place in the state too, then ``_state_tail``."""
     n, n_l = resid.shape[1], resid.shape[2]
+    with_state = state.shape[0] > 0
     for b in range(lo, hi):
         for i in range(n):
             jk = jerk[b, i] / (jerk[b, i] + SCALE_JERK)
@@ -93,28 +114,45 @@ def _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, lo, hi):
                 for k in range(N_KINDS):
                     o[KIND0 + k] = one_hot[i, l, k]
                 o[VALID] = v
+                if with_state:
+                    at = (i * n_l + l) * N_FEATURES
+                    for f in range(N_FEATURES):
+                        state[b, at + f] = o[f]
+        if with_state:
+            _state_tail(x, P, state, b, n * n_l * N_FEATURES)
 
 
 @njit(cache=True)
-def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out):
+def _fill(resid, pred, applied, jerk, nis, valid, one_hot, out, state, x, P):
     """``_fill_rows`` over the batch, on the calling thread."""
-    _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, 0, resid.shape[0])
+    _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, state, x, P, 0, resid.shape[0])
 
 
 @njit(cache=True, parallel=True)
-def _fill_threaded(resid, pred, applied, jerk, nis, valid, one_hot, out):
+def _fill_threaded(resid, pred, applied, jerk, nis, valid, one_hot, out, state, x, P):
     """``_fill_rows`` with threads over blocks of ``BLOCK`` episodes."""
     n_b = resid.shape[0]
     for block in prange((n_b + BLOCK - 1) // BLOCK):
         lo, hi = block_bounds(block, n_b)
-        _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, lo, hi)
+        _fill_rows(resid, pred, applied, jerk, nis, valid, one_hot, out, state, x, P, lo, hi)
+
+
+@njit(cache=True, inline="always")
+def _state_tail(x, P, state, b, at):
+    """The state's part after the observation, from column ``at``: prior positions (N·3), velocities (N·3),
+    √tr(P_pp) (N)."""
+    n = x.shape[1]
+    for i in range(n):
+        for d in range(3):
+            state[b, at + 3 * i + d] = x[b, i, d]
+            state[b, at + 3 * n + 3 * i + d] = x[b, i, 3 + d]
+        state[b, at + 6 * n + i] = math.sqrt(P[b, i, 0, 0] + P[b, i, 1, 1] + P[b, i, 2, 2])
 
 
 @njit(cache=True, inline="always")
 def _state_rows(obs, x, P, out, lo, hi):
-    """``build_state`` for episodes lo..hi−1."""
+    """``build_state`` for episodes lo..hi−1: the observation copied, then ``_state_tail``."""
     n, n_l, n_f = obs.shape[1], obs.shape[2], obs.shape[3]
-    at = n * n_l * n_f
     for b in range(lo, hi):
         k = 0
         for i in range(n):
@@ -122,11 +160,7 @@ def _state_rows(obs, x, P, out, lo, hi):
                 for f in range(n_f):
                     out[b, k] = obs[b, i, l, f]
                     k += 1
-        for i in range(n):
-            for d in range(3):
-                out[b, at + 3 * i + d] = x[b, i, d]
-                out[b, at + 3 * n + 3 * i + d] = x[b, i, 3 + d]
-            out[b, at + 6 * n + i] = math.sqrt(P[b, i, 0, 0] + P[b, i, 1, 1] + P[b, i, 2, 2])
+        _state_tail(x, P, out, b, k)
 
 
 @njit(cache=True)
