@@ -113,31 +113,24 @@ class UnfusedCore:
         o["valid"][:] = self.valid
 
 
-def time_steps(core: LinkTrustCore | UnfusedCore, batch: int, n_steps: int, repeats: int) -> float:
-    """Best seconds over ``repeats`` for ``n_steps`` steps from a fresh reset (the reset is not timed)."""
-    trust = np.ones((batch, core.spec.n_uav, core.spec.n_channels))
+def time_steps(core: LinkTrustCore | UnfusedCore | World, batch: int, n_steps: int, repeats: int) -> float:
+    """Best seconds over ``repeats`` for ``n_steps`` steps from a fresh reset (the reset is not timed): a core's
+    ``step`` with full trust, or a world's ``sense``."""
+    if isinstance(core, World):
+        step = core.sense
+    else:
+        trust = np.ones((batch, core.spec.n_uav, core.spec.n_channels))
+
+        def step() -> None:
+            core.step(trust)
     core.reset(np.arange(batch))
-    core.step(trust)  # compile / load the kernels
+    step()  # compile / load the kernels
     best = float("inf")
     for _ in range(repeats):
         core.reset(np.arange(batch))
         t0 = time.perf_counter()
         for _ in range(n_steps):
-            core.step(trust)
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-def time_sensing(world: World, batch: int, n_steps: int, repeats: int) -> float:
-    """Best seconds over ``repeats`` for ``n_steps`` calls of ``world.sense`` from a fresh reset (not timed)."""
-    world.reset(np.arange(batch))
-    world.sense()  # compile / load the kernel
-    best = float("inf")
-    for _ in range(repeats):
-        world.reset(np.arange(batch))
-        t0 = time.perf_counter()
-        for _ in range(n_steps):
-            world.sense()
+            step()
         best = min(best, time.perf_counter() - t0)
     return best
 
@@ -155,7 +148,7 @@ def measure_rows(quick: bool = False) -> list[dict]:
             sec = time_steps(make(task, batch), batch, n_steps, repeats)
             rows.append({"impl": impl, "B": batch, "env_steps_per_s": batch * n_steps / sec,
                          "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
-        sec = time_sensing(World(spec, batch), batch, n_steps, repeats)
+        sec = time_steps(World(spec, batch), batch, n_steps, repeats)
         rows.append({"impl": "world-sense", "B": batch, "env_steps_per_s": batch * n_steps / sec,
                      "uav_steps_per_s": batch * spec.n_uav * n_steps / sec})
     return rows
